@@ -1,0 +1,1 @@
+"""lrf-emulator: virtual laser range finders in a smoky 3D scene."""

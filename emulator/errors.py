@@ -1,0 +1,9 @@
+"""User errors: reported as one line on stderr with exit status 2, never a traceback."""
+
+
+class UserError(Exception):
+    """Something the user can fix: a bad scene file, argument or log."""
+
+
+class SceneError(UserError):
+    """A scene file breaks SCENE_FORMAT.md; the message names file, table and key."""

@@ -1,0 +1,30 @@
+"""`Scan`: one revolution's output, exactly what the device would put on the wire."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Scan:
+    """Raw device values of one scan.
+
+    `values` are wire values (URG: mm or an error code < 20; LMS200: distance
+    in `unit` or 8183–8191), one per entry of `angles_rad` (sensor frame:
+    0 = straight ahead along +x, positive to the left). `time_s` is the
+    simulated time at which the scan completed; `timestamp_ms` its
+    millisecond stamp.
+    """
+
+    sensor: str
+    model: str
+    time_s: float
+    angles_rad: np.ndarray
+    values: np.ndarray
+    unit: str = "mm"
+
+    @property
+    def timestamp_ms(self) -> int:
+        return int(round(self.time_s * 1000.0))

@@ -1,0 +1,1 @@
+"""Bundled scenes, shipped as package data (see pyproject.toml)."""
