@@ -1,0 +1,66 @@
+"""Shapes as triangle meshes, in their local frame or placed in the world.
+
+trimesh builds and loads the meshes; the optics casts rays against them with
+Embree. Analytic shapes keep their exact form in `model.py` for exact chord
+lengths; the meshes here are what Embree sees.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from emulator.scene.model import Box, Cylinder, MeshFile, Pose, Shape, Sphere
+
+MESH_SUFFIXES = (".glb", ".gltf", ".obj", ".stl", ".ply")
+SPHERE_SUBDIVISIONS = 3
+CYLINDER_SECTIONS = 64
+
+
+class MeshLoadError(ValueError):
+    """A mesh file that cannot be used; the message says why."""
+
+
+def load_mesh_file(path: Path) -> trimesh.Trimesh:
+    """Load a mesh file as one triangle mesh (a glTF scene is flattened)."""
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise MeshLoadError(f"unsupported mesh format {path.suffix!r} (use {', '.join(MESH_SUFFIXES)})")
+    if not path.is_file():
+        raise MeshLoadError(f"mesh file not found: {path}")
+    try:
+        mesh = trimesh.load(path, force="mesh", process=True)
+    except Exception as error:  # trimesh raises many kinds for a corrupt file
+        raise MeshLoadError(f"cannot read mesh {path.name}: {error}") from error
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise MeshLoadError(f"mesh {path.name} has no triangles")
+    return mesh
+
+
+def shape_mesh(shape: Shape) -> trimesh.Trimesh:
+    """The shape as a triangle mesh in its local frame, centred on the origin."""
+    if isinstance(shape, Box):
+        return trimesh.creation.box(extents=shape.size)
+    if isinstance(shape, Sphere):
+        return trimesh.creation.icosphere(subdivisions=SPHERE_SUBDIVISIONS, radius=shape.radius)
+    if isinstance(shape, Cylinder):
+        return trimesh.creation.cylinder(radius=shape.radius, height=shape.height, sections=CYLINDER_SECTIONS)
+    if isinstance(shape, MeshFile):
+        return load_mesh_file(shape.path)
+    raise TypeError(f"unknown shape {shape!r}")
+
+
+def world_mesh(shape: Shape, pose: Pose) -> trimesh.Trimesh:
+    """The shape's mesh placed in the world frame by `pose`."""
+    mesh = shape_mesh(shape).copy()
+    mesh.apply_transform(pose.matrix())
+    return mesh
+
+
+def world_to_local(pose: Pose, points: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Ray origins and directions expressed in the pose's local frame."""
+    rotation = pose.rotation_matrix()
+    local_points = (np.asarray(points) - np.asarray(pose.position)) @ rotation
+    local_directions = np.asarray(directions) @ rotation
+    return local_points, local_directions
