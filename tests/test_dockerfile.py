@@ -93,7 +93,7 @@ def test_image_gets_every_file_pip_install_needs() -> None:
     copied = {src.rstrip("/") for line in _instruction("COPY") for src in line.split()[:-1]}
     setuptools = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
     package_folders = {name.split(".")[0] for name in setuptools["packages"]}
-    package_folders |= {folder for folder in setuptools["package-dir"].values() if folder}
+    package_folders |= {folder for folder in setuptools["package-dir"].values() if folder.strip(".")}
     needed = {"pyproject.toml", "README.md"} | package_folders
     assert needed <= copied, f"not copied into the image: {sorted(needed - copied)}"
     ignored = {line.strip() for line in (ROOT / ".dockerignore").read_text().splitlines()
