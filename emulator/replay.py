@@ -1,0 +1,137 @@
+"""Sensor-like objects that serve the scans of a recorded log instead of the simulation.
+
+They answer the same calls as the simulated sensors (`UrgSensor.scan(t)`,
+`LmsSensor.scan(t, start_deg=…, step_deg=…, count=…, unit=…)`), so the daemon
+and the protocol devices cannot tell them apart.
+
+Timing: simulated time 0 is the log's first scan, and the scan served at time t
+is the last one recorded at or before it, so the log plays at its recorded
+rate. At the end the log loops: it starts over one recorded period after its
+last scan, so a driver that stays connected keeps receiving scans.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from emulator.errors import UserError
+from emulator.logfile import Log
+from emulator.sensors.scan import Scan
+
+URG_MODEL = "urg-04lx"
+LMS_MODEL = "lms200"
+MODELS = (URG_MODEL, LMS_MODEL)
+
+URG_STEPS = 769
+URG_FRONT_STEP = 384
+URG_STEP_RAD = 2.0 * np.pi / 1024.0
+URG_PERIOD_S = 0.1
+URG_NO_ECHO = 0  # a step the log does not cover: "no object in range"
+
+LMS_REVOLUTION_S = 1.0 / 75.0
+LMS_NO_ECHO = 8191  # a device angle the log does not cover
+LMS_FIRST_CODE = 8183  # 8183..8191 are codes, not distances
+ANGLE_TOLERANCE_RAD = 1e-4  # a log angle matches a beam within this (logs keep 6 decimals)
+
+
+class _LogClock:
+    """Maps simulated time to a row of the log, looping at the end."""
+
+    def __init__(self, log: Log, default_period_s: float) -> None:
+        times = log.times_s
+        self._times = times - times[0]
+        period = float(np.median(np.diff(times))) if len(times) > 1 else default_period_s
+        self.period_s = period
+        self._span = self._times[-1] + period
+
+    def row_at(self, time_s: float) -> int:
+        offset = float(np.mod(time_s, self._span))
+        # A millisecond's slack: log timestamps are rounded to 1 ms.
+        return max(0, int(np.searchsorted(self._times, offset + 5e-4, side="right")) - 1)
+
+
+class UrgReplay:
+    """A URG-04LX serving a log's scans: 769 values for steps 0..768."""
+
+    model = URG_MODEL
+    period_s = URG_PERIOD_S
+
+    def __init__(self, log: Log, name: str = "urg") -> None:
+        _check_model(log, URG_MODEL)
+        steps = np.round(log.angles_rad / URG_STEP_RAD).astype(np.int64) + URG_FRONT_STEP
+        off_grid = np.abs((steps - URG_FRONT_STEP) * URG_STEP_RAD - log.angles_rad) > ANGLE_TOLERANCE_RAD
+        if np.any(off_grid) or np.any((steps < 0) | (steps >= URG_STEPS)):
+            raise UserError("log angles are not URG-04LX steps (0..768, 2π/1024 rad apart, 0 = step 384)")
+        self.name = name
+        self._clock = _LogClock(log, URG_PERIOD_S)
+        self._values = np.full((len(log.values), URG_STEPS), URG_NO_ECHO, dtype=np.int64)
+        np.put_along_axis(self._values, steps, log.values, axis=1)
+        self._angles = (np.arange(URG_STEPS) - URG_FRONT_STEP) * URG_STEP_RAD
+
+    def scan(self, time_s: float) -> Scan:
+        values = self._values[self._clock.row_at(time_s)]
+        return Scan(self.name, self.model, time_s, self._angles, values.copy(), "mm")
+
+
+class LmsReplay:
+    """An LMS200 serving a log's scans for any requested window of device angles.
+
+    Device angle = sensor-frame angle + 90° (0° = right, 180° = left). A requested
+    angle the log does not hold gets 8191 (no echo); distances are converted
+    between the log's unit and the requested one, codes 8183..8191 pass unchanged.
+    """
+
+    model = LMS_MODEL
+    period_s = LMS_REVOLUTION_S
+
+    def __init__(self, log: Log, name: str = "lms") -> None:
+        _check_model(log, LMS_MODEL)
+        if log.header.unit not in ("mm", "cm"):
+            raise UserError(f"log unit {log.header.unit!r}: an LMS200 log is in mm or cm")
+        self.name = name
+        self._clock = _LogClock(log, 2 * LMS_REVOLUTION_S)
+        self._unit = log.header.unit
+        self._angles = log.angles_rad[0]
+        if np.any(np.abs(log.angles_rad - self._angles) > ANGLE_TOLERANCE_RAD):
+            raise UserError("an LMS200 log must use the same angles on every line")
+        if len(self._angles) < 2 or np.any(np.diff(self._angles) <= 0):
+            raise UserError("an LMS200 log needs at least two angles, increasing from right to left")
+        self._values = log.values
+
+    def scan(
+        self, time_s: float, *, start_deg: float = 0.0, step_deg: float = 0.5,
+        count: int = 361, unit: str = "mm",
+    ) -> Scan:
+        wanted = np.radians(start_deg + step_deg * np.arange(count) - 90.0)
+        nearest = np.clip(np.searchsorted(self._angles, wanted), 1, len(self._angles) - 1)
+        left_closer = np.abs(self._angles[nearest - 1] - wanted) <= np.abs(self._angles[nearest] - wanted)
+        nearest = np.where(left_closer, nearest - 1, nearest)
+        found = np.abs(self._angles[nearest] - wanted) <= ANGLE_TOLERANCE_RAD
+        recorded = _convert_unit(self._values[self._clock.row_at(time_s)][nearest], self._unit, unit)
+        values = np.where(found, recorded, LMS_NO_ECHO)
+        return Scan(self.name, self.model, time_s, wanted, values, unit)
+
+
+def _convert_unit(values: np.ndarray, from_unit: str, to_unit: str) -> np.ndarray:
+    if from_unit == to_unit:
+        return values
+    is_code = values >= LMS_FIRST_CODE
+    if to_unit == "cm":
+        converted = np.round(values / 10.0).astype(np.int64)
+    else:
+        converted = np.minimum(values * 10, LMS_FIRST_CODE)
+    return np.where(is_code, values, converted)
+
+
+def _check_model(log: Log, model: str) -> None:
+    if log.header.model and log.header.model != model:
+        raise UserError(f"the log was recorded from a {log.header.model}, not a {model}")
+
+
+def replay_sensor(log: Log, model: str, name: str) -> UrgReplay | LmsReplay:
+    """The replaying sensor for `model` ("urg-04lx" or "lms200")."""
+    if model == URG_MODEL:
+        return UrgReplay(log, name)
+    if model == LMS_MODEL:
+        return LmsReplay(log, name)
+    raise UserError(f"unknown model {model!r} (use {' or '.join(MODELS)})")
