@@ -1,15 +1,19 @@
-"""`lrf-emulator scenes` (CLI.md). PLACEHOLDER: replaced by the module's owner."""
+"""`lrf-emulator scenes` (CLI.md): the bundled scenes, one line each with its description."""
 
 from __future__ import annotations
 
 import argparse
 
-from emulator.errors import UserError
+from emulator.scene import bundled_scenes
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    pass
+    """No options: the command only lists."""
 
 
 def run(args: argparse.Namespace) -> int:
-    raise UserError("not implemented yet")
+    scenes = bundled_scenes()
+    width = max((len(scene.name) for scene in scenes), default=0) + 2
+    for scene in scenes:
+        print(f"{scene.name:<{width}}{scene.description}".rstrip())
+    return 0

@@ -1,0 +1,542 @@
+"""Load a scene file (SCENE_FORMAT.md) into the immutable dataclasses of `model.py`.
+
+Validation is strict so that a typo never silently becomes a default: unknown
+keys, wrong types (a boolean is not a number), NaN/inf, out-of-range values,
+duplicate names, unknown materials, unusable meshes and shared endpoints are
+all rejected. Every problem is one `SceneError` line naming the file, the table
+and the key, e.g. ``railway.toml: smoke.plumes[1].rate: must be > 0, got -3``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import re
+import tomllib
+from dataclasses import dataclass
+from importlib.resources import files
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any, Iterable, Mapping, Sequence
+
+from emulator.errors import SceneError
+from emulator.scene.geometry import MeshLoadError, load_mesh_file
+from emulator.scene.materials import BUILTIN_MATERIALS, DEFAULT_MATERIAL
+from emulator.scene.model import (
+    Box,
+    Cylinder,
+    Density,
+    Material,
+    MeshFile,
+    Plume,
+    Pose,
+    Scene,
+    SceneObject,
+    SensorSpec,
+    Shape,
+    SmokeRegion,
+    Sphere,
+    Vec3,
+)
+
+BUNDLED_PACKAGE = "emulator.bundled_scenes"
+SCENE_SUFFIX = ".toml"
+
+SCENE_MODELS = ("formsma2011", "physical")
+SENSOR_MODELS = ("urg-04lx", "lms200")
+SHAPE_KEYS = ("box", "sphere", "cylinder", "mesh")
+ORIGIN: Vec3 = (0.0, 0.0, 0.0)
+
+TOP_KEYS = ("scene", "materials", "objects", "smoke", "sensors")
+SCENE_KEYS = ("name", "description", "seed", "model", "density_to_extinction")
+SMOKE_KEYS = ("regions", "plumes")
+OBJECT_KEYS = ("name", *SHAPE_KEYS, "position", "rotation_deg", "material")
+REGION_KEYS = ("name", *SHAPE_KEYS, "position", "rotation_deg", "density")
+PLUME_KEYS = (
+    "name", "source", "rate", "lifetime", "size", "growth",
+    "velocity", "spread", "wind", "density", "start", "stop",
+)
+MATERIAL_KEYS = tuple(field.name for field in dataclasses.fields(Material))
+
+# Model options with the real device's defaults (SCENE_FORMAT.md; firmware_profile is ours).
+URG_OPTION_KEYS = ("boot_protocol", "serial")
+LMS_OPTION_KEYS = ("baud", "angle_deg", "resolution_deg", "units", "type_string", "firmware_profile")
+OPTION_KEYS = {"urg-04lx": URG_OPTION_KEYS, "lms200": LMS_OPTION_KEYS}
+SENSOR_KEYS = ("name", "model", "position", "rotation_deg", "endpoints", *URG_OPTION_KEYS, *LMS_OPTION_KEYS)
+URG_SERIAL_MAX_CHARS = 16
+LMS_TYPE_STRING_CHARS = 21
+LMS_BAUDS = (9600, 19200, 38400, 500000)
+LMS_ANGLES_DEG = (180, 100)
+LMS_RESOLUTIONS_DEG = (1.0, 0.5, 0.25)
+
+_PRINTABLE_ASCII = re.compile(r"[\x20-\x7e]*")
+_PORT = re.compile(r"[0-9]{1,5}")
+_TOML_LOCATION = re.compile(r"^(?P<message>.*) \(at line (?P<line>\d+), column (?P<column>\d+)\)$")
+_MISSING: Any = object()
+
+
+@dataclass(frozen=True)
+class BundledScene:
+    """A scene shipped with the package, addressable by `name`."""
+
+    name: str
+    description: str
+    path: Path
+
+
+# --------------------------------------------------------------------------- finding and reading
+
+
+def load_scene(name_or_path: str | os.PathLike[str]) -> Scene:
+    """The validated scene: a bundled scene's name (no '/' and no '.toml') or a path to a TOML file."""
+    path = _locate(name_or_path)
+    return _build_scene(_read_toml(path), path)
+
+
+def bundled_scenes() -> list[BundledScene]:
+    """The scenes shipped in `scenes/`, sorted by name, with their one-line descriptions."""
+    result = []
+    for path in _bundled_paths():
+        scene_table = _read_toml(path).get("scene", {})
+        description = scene_table.get("description", "") if isinstance(scene_table, dict) else ""
+        result.append(BundledScene(path.stem, str(description), path))
+    return result
+
+
+def _bundled_dir() -> Path:
+    return Path(os.fspath(files(BUNDLED_PACKAGE)))
+
+
+def _bundled_paths() -> list[Path]:
+    return sorted(_bundled_dir().glob(f"*{SCENE_SUFFIX}"), key=lambda path: path.stem)
+
+
+def _locate(name_or_path: str | os.PathLike[str]) -> Path:
+    text = os.fspath(name_or_path)
+    is_bundled_name = "/" not in text and not text.endswith(SCENE_SUFFIX)
+    path = _bundled_dir() / f"{text}{SCENE_SUFFIX}" if is_bundled_name else Path(text)
+    if not text or not path.is_file():
+        known = ", ".join(path.stem for path in _bundled_paths()) or "none"
+        raise SceneError(f"no such scene: {text!r} (bundled: {known})")
+    return path.resolve()
+
+
+def _read_toml(path: Path) -> dict[str, Any]:
+    try:
+        with path.open("rb") as stream:
+            return tomllib.load(stream)
+    except tomllib.TOMLDecodeError as error:
+        raise SceneError(f"{path.name}: {_describe_toml_error(error)}") from error
+    except UnicodeDecodeError as error:
+        raise SceneError(f"{path.name}: not UTF-8 text (byte {error.start})") from error
+    except OSError as error:
+        raise SceneError(f"{path.name}: cannot read: {error.strerror}") from error
+
+
+def _describe_toml_error(error: tomllib.TOMLDecodeError) -> str:
+    text = str(error)
+    located = _TOML_LOCATION.match(text)
+    if located:
+        return f"line {located['line']}: {located['message']} (column {located['column']})"
+    return text.replace(" (at end of document)", "") + " at the end of the file"
+
+
+# --------------------------------------------------------------------------- typed access with places
+
+
+def _show(value: Any) -> str:
+    """A value as the user wrote it in TOML, short enough for a one-line message."""
+    if isinstance(value, bool):
+        text = "true" if value else "false"
+    elif isinstance(value, str):
+        text = json.dumps(value)
+    elif isinstance(value, float) and not math.isfinite(value):
+        text = "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")
+    elif isinstance(value, list):
+        text = "[" + ", ".join(_show(item) for item in value) + "]"
+    elif isinstance(value, dict):
+        text = "{ " + ", ".join(f"{key} = {_show(item)}" for key, item in value.items()) + " }"
+    else:
+        text = str(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+@dataclass(frozen=True)
+class _Place:
+    """Where a value sits in the file: `objects[0].box.size` in `x.toml`."""
+
+    file: str
+    path: str = ""
+
+    def key(self, name: str) -> _Place:
+        return _Place(self.file, f"{self.path}.{name}" if self.path else name)
+
+    def index(self, position: int) -> _Place:
+        return _Place(self.file, f"{self.path}[{position}]")
+
+    def error(self, message: str) -> SceneError:
+        return SceneError(f"{self.file}: {self.path}: {message}" if self.path else f"{self.file}: {message}")
+
+
+def _as_number(value: Any, place: _Place) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise place.error(f"expected a number, got {_show(value)}")
+    if not math.isfinite(value):
+        raise place.error(f"must be finite, got {_show(value)}")
+    return float(value)
+
+
+def _check_bounds(
+    value: float, raw: Any, place: _Place, *, above: float | None = None,
+    at_least: float | None = None, at_most: float | None = None,
+) -> None:
+    if above is not None and not value > above:
+        raise place.error(f"must be > {_show(above)}, got {_show(raw)}")
+    if at_least is not None and not value >= at_least:
+        raise place.error(f"must be >= {_show(at_least)}, got {_show(raw)}")
+    if at_most is not None and not value <= at_most:
+        raise place.error(f"must be <= {_show(at_most)}, got {_show(raw)}")
+
+
+def _as_string(value: Any, place: _Place) -> str:
+    if not isinstance(value, str):
+        raise place.error(f"expected a string, got {_show(value)}")
+    return value
+
+
+def _choices(options: Iterable[Any]) -> str:
+    return ", ".join(_show(option) for option in options)
+
+
+def _as_table(value: Any, place: _Place, allowed: Sequence[str]) -> _Table:
+    if not isinstance(value, dict):
+        raise place.error(f"expected a table, got {_show(value)}")
+    for key in value:
+        if key not in allowed:
+            raise place.key(key).error(f"unknown key (expected one of: {', '.join(allowed)})")
+    return _Table(value, place)
+
+
+def _as_tables(value: Any, place: _Place, allowed: Sequence[str]) -> list[_Table]:
+    if not isinstance(value, list) or not all(isinstance(item, dict) for item in value):
+        raise place.error(f"expected an array of tables ([[{place.path}]]), got {_show(value)}")
+    return [_as_table(item, place.index(position), allowed) for position, item in enumerate(value)]
+
+
+class _Table:
+    """A TOML table whose keys have already been checked against the allowed ones."""
+
+    def __init__(self, data: dict[str, Any], place: _Place) -> None:
+        self.data = data
+        self.place = place
+
+    def __contains__(self, key: str) -> bool:
+        return key in self.data
+
+    def raw(self, key: str, default: Any = _MISSING) -> Any:
+        """The value as parsed, or `default`; a missing key without a default is an error."""
+        if key in self.data:
+            return self.data[key]
+        if default is _MISSING:
+            raise self.place.key(key).error("missing required key")
+        return default
+
+    def number(self, key: str, default: Any = _MISSING, **bounds: float) -> float:
+        raw = self.raw(key, default)
+        value = _as_number(raw, self.place.key(key))
+        _check_bounds(value, raw, self.place.key(key), **bounds)
+        return value
+
+    def number_choice(self, key: str, default: float, choices: Sequence[float]) -> float:
+        raw = self.raw(key, default)
+        value = _as_number(raw, self.place.key(key))
+        if value not in choices:
+            raise self.place.key(key).error(f"must be one of {_choices(choices)}, got {_show(raw)}")
+        return value
+
+    def integer(self, key: str, default: Any = _MISSING, **bounds: float) -> int:
+        raw = self.raw(key, default)
+        if isinstance(raw, bool) or not isinstance(raw, int):
+            raise self.place.key(key).error(f"expected an integer, got {_show(raw)}")
+        _check_bounds(raw, raw, self.place.key(key), **bounds)
+        return raw
+
+    def string(self, key: str, default: Any = _MISSING, choices: Sequence[str] | None = None) -> str:
+        value = _as_string(self.raw(key, default), self.place.key(key))
+        if choices is not None and value not in choices:
+            raise self.place.key(key).error(f"must be one of {_choices(choices)}, got {_show(value)}")
+        return value
+
+    def ascii_text(self, key: str, default: str, *, max_chars: int, exact: bool = False, forbidden: str = "") -> str:
+        """Printable ASCII that a device sends verbatim (serial number, type string)."""
+        value = self.string(key, default)
+        place = self.place.key(key)
+        if not _PRINTABLE_ASCII.fullmatch(value) or any(char in value for char in forbidden):
+            extra = f" without {_choices(forbidden)}" if forbidden else ""
+            raise place.error(f"must be printable ASCII{extra}, got {_show(value)}")
+        if exact and len(value) != max_chars:
+            raise place.error(f"must be exactly {max_chars} characters, got {len(value)}: {_show(value)}")
+        if not 1 <= len(value) <= max_chars:
+            raise place.error(f"must be 1 to {max_chars} characters, got {len(value)}: {_show(value)}")
+        return value
+
+    def vec3(self, key: str, default: Any = _MISSING, **bounds: float) -> Vec3:
+        raw = self.raw(key, default)
+        place = self.place.key(key)
+        if not isinstance(raw, (list, tuple)) or len(raw) != 3:
+            raise place.error(f"expected 3 numbers, got {_show(raw)}")
+        values = []
+        for position, item in enumerate(raw):
+            if isinstance(item, bool) or not isinstance(item, (int, float)):
+                raise place.error(f"expected 3 numbers, got {_show(raw)}")
+            value = _as_number(item, place.index(position))
+            _check_bounds(value, item, place.index(position), **bounds)
+            values.append(value)
+        return (values[0], values[1], values[2])
+
+    def table(self, key: str, allowed: Sequence[str]) -> _Table:
+        return _as_table(self.raw(key, _MISSING), self.place.key(key), allowed)
+
+    def tables(self, key: str, allowed: Sequence[str]) -> list[_Table]:
+        return _as_tables(self.raw(key, []), self.place.key(key), allowed)
+
+    def name(self, seen: dict[str, str]) -> str:
+        """This item's `name`, which must differ from every name in `seen` (name → its table path)."""
+        value = self.string("name")
+        if not value.strip():
+            raise self.place.key("name").error("must not be empty")
+        if value in seen:
+            raise self.place.key("name").error(f"duplicate name {_show(value)} (also {seen[value]})")
+        seen[value] = self.place.path
+        return value
+
+    def pose(self) -> Pose:
+        return Pose(self.vec3("position", ORIGIN), self.vec3("rotation_deg", ORIGIN))
+
+
+# --------------------------------------------------------------------------- the scene's parts
+
+
+def _build_scene(raw: dict[str, Any], path: Path) -> Scene:
+    root = _as_table(raw, _Place(path.name), TOP_KEYS)
+    header = root.table("scene", SCENE_KEYS) if "scene" in root else _Table({}, root.place.key("scene"))
+    description = header.string("description", "")
+    if "\n" in description:
+        raise header.place.key("description").error("must be one line")
+    materials = _materials(root.tables("materials", MATERIAL_KEYS))
+    smoke = root.table("smoke", SMOKE_KEYS) if "smoke" in root else _Table({}, root.place.key("smoke"))
+    return Scene(
+        path=path,
+        name=header.string("name", path.stem),
+        description=description,
+        seed=header.integer("seed", 0, at_least=0),
+        model=header.string("model", "formsma2011", SCENE_MODELS),
+        density_to_extinction=header.number("density_to_extinction", 250.0, above=0),
+        materials=materials,
+        objects=_objects(root.tables("objects", OBJECT_KEYS), materials, path.parent),
+        regions=_regions(smoke.tables("regions", REGION_KEYS), path.parent),
+        plumes=_plumes(smoke.tables("plumes", PLUME_KEYS)),
+        sensors=_sensors(root.tables("sensors", SENSOR_KEYS)),
+    )
+
+
+def _materials(tables: list[_Table]) -> Mapping[str, Material]:
+    """The built-ins, plus the scene's own: a new name adds a material, a built-in's name overrides it."""
+    materials = dict(BUILTIN_MATERIALS)
+    seen: dict[str, str] = {}
+    for table in tables:
+        name = table.name(seen)
+        base = materials.get(name)
+        required = _MISSING if base is None else base.reflectivity
+        values: dict[str, Any] = {"reflectivity": table.number("reflectivity", required, at_least=0, at_most=1)}
+        for key in MATERIAL_KEYS:
+            if key not in ("name", "reflectivity") and key in table:
+                values[key] = table.number(key)
+        materials[name] = dataclasses.replace(base, **values) if base else Material(name, **values)
+    return MappingProxyType(materials)
+
+
+def _shape(table: _Table, scene_dir: Path, *, closed: bool) -> Shape:
+    """Exactly one of box, sphere, cylinder, mesh; a smoke region's mesh must be `closed` (watertight)."""
+    present = [key for key in SHAPE_KEYS if key in table]
+    if not present:
+        raise table.place.error(f"needs exactly one shape key: {', '.join(SHAPE_KEYS)}")
+    if len(present) > 1:
+        raise table.place.key(present[1]).error(f"only one shape key allowed, already has {present[0]}")
+    kind = present[0]
+    if kind == "box":
+        return Box(table.table("box", ("size",)).vec3("size", above=0))
+    if kind == "sphere":
+        return Sphere(table.table("sphere", ("radius",)).number("radius", above=0))
+    if kind == "cylinder":
+        cylinder = table.table("cylinder", ("radius", "height"))
+        return Cylinder(cylinder.number("radius", above=0), cylinder.number("height", above=0))
+    mesh_path = (scene_dir / table.string("mesh")).resolve()
+    place = table.place.key("mesh")
+    try:
+        mesh = load_mesh_file(mesh_path)
+    except MeshLoadError as error:
+        raise place.error(str(error)) from error
+    if closed and not mesh.is_watertight:
+        raise place.error(f"mesh {mesh_path.name} is not watertight; a smoke region must be a closed volume")
+    return MeshFile(mesh_path)
+
+
+def _objects(tables: list[_Table], materials: Mapping[str, Material], scene_dir: Path) -> tuple[SceneObject, ...]:
+    seen: dict[str, str] = {}
+    objects = []
+    for table in tables:
+        name = table.name(seen)
+        material = table.string("material", DEFAULT_MATERIAL)
+        if material not in materials:
+            known = ", ".join(sorted(materials))
+            raise table.place.key("material").error(f"unknown material {_show(material)} (known: {known})")
+        objects.append(SceneObject(name, _shape(table, scene_dir, closed=False), table.pose(), material))
+    return tuple(objects)
+
+
+def _density(table: _Table) -> Density:
+    """A constant density >= 0, or { keyframes = [[t, density], ...] } with strictly increasing times."""
+    place = table.place.key("density")
+    raw = table.raw("density", _MISSING)
+    if isinstance(raw, dict):
+        return _keyframes(_as_table(raw, place, ("keyframes",)))
+    if isinstance(raw, bool) or not isinstance(raw, (int, float)):
+        raise place.error(f"expected a number or {{ keyframes = [[time, density], ...] }}, got {_show(raw)}")
+    return Density(((0.0, table.number("density", at_least=0)),))
+
+
+def _keyframes(table: _Table) -> Density:
+    place = table.place.key("keyframes")
+    raw = table.raw("keyframes", _MISSING)
+    if not isinstance(raw, list) or not raw:
+        raise place.error(f"expected a non-empty list of [time, density], got {_show(raw)}")
+    keyframes: list[tuple[float, float]] = []
+    for position, pair in enumerate(raw):
+        pair_place = place.index(position)
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise pair_place.error(f"expected [time, density], got {_show(pair)}")
+        time_s = _as_number(pair[0], pair_place.index(0))
+        density = _as_number(pair[1], pair_place.index(1))
+        _check_bounds(density, pair[1], pair_place.index(1), at_least=0)
+        if keyframes and not time_s > keyframes[-1][0]:
+            raise pair_place.index(0).error(
+                f"keyframe times must increase strictly, got {_show(pair[0])} after {_show(raw[position - 1][0])}"
+            )
+        keyframes.append((time_s, density))
+    return Density(tuple(keyframes))
+
+
+def _regions(tables: list[_Table], scene_dir: Path) -> tuple[SmokeRegion, ...]:
+    seen: dict[str, str] = {}
+    return tuple(
+        SmokeRegion(table.name(seen), _shape(table, scene_dir, closed=True), table.pose(), _density(table))
+        for table in tables
+    )
+
+
+def _plumes(tables: list[_Table]) -> tuple[Plume, ...]:
+    seen: dict[str, str] = {}
+    plumes = []
+    for table in tables:
+        name = table.name(seen)
+        start = table.number("start", 0.0)
+        stop = table.number("stop", 1e9)
+        if not start < stop:
+            raise table.place.key("stop").error(f"must be > start ({_show(table.raw('start', start))}), got {_show(table.raw('stop', stop))}")
+        plumes.append(
+            Plume(
+                name=name,
+                source=table.vec3("source"),
+                rate=table.number("rate", above=0),
+                lifetime=table.number("lifetime", above=0),
+                size=table.number("size", above=0),
+                growth=table.number("growth", 0.0, at_least=0),
+                velocity=table.vec3("velocity", ORIGIN),
+                spread=table.number("spread", 0.0, at_least=0),
+                wind=table.vec3("wind", ORIGIN),
+                density=table.number("density", at_least=0),
+                start=start,
+                stop=stop,
+            )
+        )
+    return tuple(plumes)
+
+
+# --------------------------------------------------------------------------- sensors
+
+
+def _endpoint_identity(text: str, place: _Place) -> tuple[Any, ...]:
+    """What two endpoints must not share: a pty's normalised path, a TCP host and port."""
+    scheme, _, rest = text.partition(":")
+    if scheme == "pty" and rest:
+        return ("pty", os.path.normpath(rest))
+    if scheme == "tcp":
+        host, _, port = rest.rpartition(":")
+        if host and _PORT.fullmatch(port) and 1 <= int(port) <= 65535:
+            return ("tcp", host.lower(), int(port))
+    raise place.error(f'expected "pty:PATH" or "tcp:HOST:PORT" with PORT 1..65535, got {_show(text)}')
+
+
+def _endpoints(table: _Table, owners: dict[tuple[Any, ...], str], sensor: str) -> tuple[str, ...]:
+    place = table.place.key("endpoints")
+    raw = table.raw("endpoints", [])
+    if not isinstance(raw, list):
+        raise place.error(f"expected a list of endpoints, got {_show(raw)}")
+    endpoints = []
+    for position, item in enumerate(raw):
+        item_place = place.index(position)
+        text = _as_string(item, item_place)
+        identity = _endpoint_identity(text, item_place)
+        if identity in owners:
+            raise item_place.error(f"endpoint {_show(text)} already used by sensor {_show(owners[identity])}")
+        owners[identity] = sensor
+        endpoints.append(text)
+    return tuple(endpoints)
+
+
+def _urg_options(table: _Table) -> dict[str, Any]:
+    return {
+        "boot_protocol": table.string("boot_protocol", "scip2", ("scip2", "scip1")),
+        # ';' separates the fields of the SCIP VV reply, so a serial must not contain one.
+        "serial": table.ascii_text("serial", "H0706400", max_chars=URG_SERIAL_MAX_CHARS, forbidden=";"),
+    }
+
+
+def _lms_options(table: _Table) -> dict[str, Any]:
+    angle_deg = int(table.number_choice("angle_deg", 180, LMS_ANGLES_DEG))
+    resolution_deg = table.number_choice("resolution_deg", 0.5, LMS_RESOLUTIONS_DEG)
+    if angle_deg == 180 and resolution_deg == 0.25:
+        raise table.place.key("resolution_deg").error("0.25 needs angle_deg = 100 (the LMS200 has no 180° scan at 0.25°)")
+    baud = table.integer("baud", 9600)
+    if baud not in LMS_BAUDS:
+        raise table.place.key("baud").error(f"must be one of {_choices(LMS_BAUDS)}, got {baud}")
+    return {
+        "baud": baud,
+        "angle_deg": angle_deg,
+        "resolution_deg": resolution_deg,
+        "units": table.string("units", "mm", ("mm", "cm")),
+        "type_string": table.ascii_text(
+            "type_string", "LMS200;301063;V02.10 ", max_chars=LMS_TYPE_STRING_CHARS, exact=True
+        ),
+        "firmware_profile": table.string("firmware_profile", "v2.30", ("v2.30", "32-byte-config")),
+    }
+
+
+def _sensors(tables: list[_Table]) -> tuple[SensorSpec, ...]:
+    seen: dict[str, str] = {}
+    owners: dict[tuple[Any, ...], str] = {}
+    sensors = []
+    for table in tables:
+        name = table.name(seen)
+        model = table.string("model", choices=SENSOR_MODELS)
+        other_model = next(other for other in SENSOR_MODELS if other != model)
+        foreign = next((key for key in OPTION_KEYS[other_model] if key in table), None)
+        if foreign:
+            raise table.place.key(foreign).error(f"is a {other_model} option, but this sensor's model is {_show(model)}")
+        options = _urg_options(table) if model == "urg-04lx" else _lms_options(table)
+        endpoints = _endpoints(table, owners, name)
+        sensors.append(SensorSpec(name, model, table.pose(), endpoints, MappingProxyType(options)))
+    return tuple(sensors)
