@@ -1,0 +1,6 @@
+"""Beams against the scene at time t: the only place that talks to Embree."""
+
+from emulator.optics.hits import BeamHits, RegionCrossing
+from emulator.optics.world import World
+
+__all__ = ["BeamHits", "RegionCrossing", "World"]

@@ -1,0 +1,40 @@
+"""The simulated sensors: `create_sensor(scene, name)` and `ranges_m(scan)`."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from emulator.errors import UserError
+from emulator.optics import World
+from emulator.scene.model import Scene
+from emulator.sensors import lms200, urg04lx
+from emulator.sensors.lms200 import LmsSensor
+from emulator.sensors.scan import Scan
+from emulator.sensors.urg04lx import UrgSensor
+
+Sensor = UrgSensor | LmsSensor
+
+__all__ = ["LmsSensor", "Scan", "Sensor", "UrgSensor", "create_sensor", "ranges_m"]
+
+
+def create_sensor(scene: Scene, name: str, world: World | None = None) -> Sensor:
+    """The scene's sensor `name`. Pass one `World` to share it between a scene's sensors."""
+    known = [spec.name for spec in scene.sensors]
+    if name not in known:
+        raise UserError(f"no sensor named {name!r} in scene {scene.name!r} (known: {', '.join(known) or 'none'})")
+    spec = scene.sensor(name)
+    world = world if world is not None else World(scene)
+    if spec.model == urg04lx.MODEL:
+        return UrgSensor(scene, spec, world)
+    if spec.model == lms200.MODEL:
+        return LmsSensor(scene, spec, world)
+    raise UserError(f"sensor {name!r}: unknown model {spec.model!r} (known: {urg04lx.MODEL}, {lms200.MODEL})")
+
+
+def ranges_m(scan: Scan) -> np.ndarray:
+    """The scan's values in metres, NaN where the device reported an error code."""
+    if scan.model == urg04lx.MODEL:
+        return urg04lx.ranges_m(scan.values)
+    if scan.model == lms200.MODEL:
+        return lms200.ranges_m(scan.values, scan.unit)
+    raise ValueError(f"unknown sensor model {scan.model!r}")

@@ -1,0 +1,175 @@
+"""Exact intervals along rays inside closed shapes, vectorised over rays.
+
+Each function takes ray origins (N, 3) and unit directions (N, 3) in the
+shape's local frame and returns `(entry, exit)` arrays of shape (N, K): the
+distances along each ray where it enters and leaves the shape. Convex shapes
+give K = 1; a mesh gives as many intervals as the ray needs. Missing
+intervals are `entry = exit = inf`. Intervals are not clipped: entries may be
+negative when the origin is inside (the caller clips to the beam).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+
+from emulator.scene.model import Box, Cylinder, MeshFile, Shape, Sphere
+from emulator.scene.geometry import shape_mesh
+
+NO_HIT = np.inf
+_CROSSING_CHUNK = 2_000_000  # rays × triangles per Möller–Trumbore batch
+_SAME_CROSSING_M = 1e-9  # crossings closer than this with the same orientation are one (a shared edge)
+
+
+def _empty_where(entry: np.ndarray, exit_: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mark empty intervals (exit < entry or NaN) as missing."""
+    missing = ~(exit_ >= entry)
+    return np.where(missing, NO_HIT, entry), np.where(missing, NO_HIT, exit_)
+
+
+def _slab(
+    origins: np.ndarray, directions: np.ndarray, lower: np.ndarray, upper: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Slab test of rays (N, A) against boxes (M, A) over A axes → near, far (N, M).
+
+    The ray is inside box m for near < t < far (empty when far < near). A
+    direction component of exactly 0 keeps the ray inside that axis's slab for
+    all t when its origin lies within it, and outside otherwise.
+    """
+    near = np.full((len(origins), len(lower)), -np.inf)
+    far = np.full((len(origins), len(lower)), np.inf)
+    for axis in range(origins.shape[1]):
+        o = origins[:, axis, None]
+        d = directions[:, axis, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inverse = 1.0 / d
+            t_lower = (lower[None, :, axis] - o) * inverse
+            t_upper = (upper[None, :, axis] - o) * inverse
+        axis_near = np.minimum(t_lower, t_upper)
+        axis_far = np.maximum(t_lower, t_upper)
+        parallel = d[:, 0] == 0.0
+        if parallel.any():
+            o_parallel = o[parallel]
+            inside = (lower[None, :, axis] <= o_parallel) & (o_parallel <= upper[None, :, axis])
+            axis_near[parallel] = np.where(inside, -np.inf, np.inf)
+            axis_far[parallel] = np.where(inside, np.inf, -np.inf)
+        np.maximum(near, axis_near, out=near)
+        np.minimum(far, axis_far, out=far)
+    return near, far
+
+
+def slab_intervals(
+    origins: np.ndarray, directions: np.ndarray, lower: np.ndarray, upper: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Entry and exit of rays (N, 3) through axis-aligned boxes [lower, upper] (M, 3) → (N, M)."""
+    return _empty_where(*_slab(origins, directions, lower, upper))
+
+
+def box_intervals(shape: Box, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    half = 0.5 * np.asarray(shape.size, dtype=float)[None, :]
+    return slab_intervals(origins, directions, -half, half)
+
+
+def sphere_intervals(shape: Sphere, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    b = np.einsum("ij,ij->i", origins, directions)
+    c = np.einsum("ij,ij->i", origins, origins) - shape.radius**2
+    with np.errstate(invalid="ignore"):
+        root = np.sqrt(b * b - c)
+    return _empty_where((-b - root)[:, None], (-b + root)[:, None])
+
+
+def cylinder_intervals(shape: Cylinder, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The side (a quadratic in the xy-plane) intersected with the caps' slab in z."""
+    ox, oy = origins[:, 0], origins[:, 1]
+    dx, dy = directions[:, 0], directions[:, 1]
+    a = dx * dx + dy * dy
+    b = ox * dx + oy * dy
+    c = ox * ox + oy * oy - shape.radius**2
+    along_axis = a == 0.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        root = np.sqrt(b * b - a * c)
+        side_near = np.where(along_axis, np.where(c <= 0, -np.inf, np.inf), (-b - root) / a)
+        side_far = np.where(along_axis, np.where(c <= 0, np.inf, -np.inf), (-b + root) / a)
+    half_height = np.array([[0.5 * shape.height]])
+    cap_near, cap_far = _slab(origins[:, 2:], directions[:, 2:], -half_height, half_height)
+    near = np.maximum(side_near, cap_near[:, 0])
+    far = np.minimum(side_far, cap_far[:, 0])
+    return _empty_where(near[:, None], far[:, None])
+
+
+def _ray_triangle_crossings(
+    origins: np.ndarray, directions: np.ndarray, triangles: np.ndarray, normals: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Möller–Trumbore against every triangle: distances t > 0 (N, T), inf where
+    missed, and the crossing's orientation: +1 leaving (d·n > 0), -1 entering."""
+    v0, edge1, edge2 = triangles[:, 0], triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
+    p = np.cross(directions[:, None, :], edge2[None, :, :])
+    det = np.einsum("ntk,tk->nt", p, edge1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv_det = 1.0 / det
+        s = origins[:, None, :] - v0[None, :, :]
+        u = np.einsum("ntk,ntk->nt", s, p) * inv_det
+        q = np.cross(s, edge1[None, :, :])
+        v = np.einsum("nk,ntk->nt", directions, q) * inv_det
+        t = np.einsum("tk,ntk->nt", edge2, q) * inv_det
+    hit = (det != 0.0) & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > 0.0)
+    orientation = np.sign(directions @ normals.T)
+    return np.where(hit, t, np.inf), np.where(hit, orientation, 0.0)
+
+
+def mesh_intervals(
+    mesh: trimesh.Trimesh, origins: np.ndarray, directions: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every interval inside a closed mesh, from all ray/triangle crossings.
+
+    The winding number at the origin is the sum of the orientations of all
+    crossings ahead (a leaving crossing ahead means the origin is inside);
+    walking along the ray each crossing changes it by its orientation, and
+    the ray is inside wherever it is positive. Two crossings at the same
+    distance with the same orientation are one crossing through a shared
+    edge or vertex and are counted once.
+    """
+    triangles = np.asarray(mesh.triangles, dtype=float)
+    normals = np.asarray(mesh.face_normals, dtype=float)
+    rows = max(1, _CROSSING_CHUNK // max(1, len(triangles)))
+    distance_parts, orientation_parts = [], []
+    for start in range(0, len(origins), rows):
+        t, sign = _ray_triangle_crossings(origins[start : start + rows], directions[start : start + rows], triangles, normals)
+        distance_parts.append(t)
+        orientation_parts.append(sign)
+    distances = np.concatenate(distance_parts)
+    orientations = np.concatenate(orientation_parts)
+    order = np.argsort(distances, axis=1)
+    distances = np.take_along_axis(distances, order, axis=1)
+    orientations = np.take_along_axis(orientations, order, axis=1)
+    duplicate = np.zeros_like(distances, dtype=bool)
+    duplicate[:, 1:] = (np.abs(np.diff(distances, axis=1)) < _SAME_CROSSING_M) & (
+        orientations[:, 1:] == orientations[:, :-1]
+    )
+    orientations = np.where(duplicate, 0.0, orientations)
+    most = int((orientations != 0).sum(axis=1).max(initial=0))
+    keep = np.argsort(orientations == 0, axis=1, kind="stable")[:, :most]
+    distances = np.take_along_axis(distances, keep, axis=1)
+    orientations = np.take_along_axis(orientations, keep, axis=1)
+    winding_at_origin = orientations.sum(axis=1)
+    winding_after = winding_at_origin[:, None] - np.cumsum(orientations, axis=1)
+    starts = np.concatenate([np.full((len(origins), 1), -np.inf), distances], axis=1)
+    ends = np.concatenate([distances, np.full((len(origins), 1), np.inf)], axis=1)
+    inside = np.concatenate([winding_at_origin[:, None], winding_after], axis=1) > 0
+    inside &= ends > starts
+    return np.where(inside, starts, NO_HIT), np.where(inside, ends, NO_HIT)
+
+
+def shape_intervals(
+    shape: Shape, origins: np.ndarray, directions: np.ndarray, mesh: trimesh.Trimesh | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Intervals inside `shape` for rays in its local frame (`mesh` caches a MeshFile's mesh)."""
+    if isinstance(shape, Box):
+        return box_intervals(shape, origins, directions)
+    if isinstance(shape, Sphere):
+        return sphere_intervals(shape, origins, directions)
+    if isinstance(shape, Cylinder):
+        return cylinder_intervals(shape, origins, directions)
+    if isinstance(shape, MeshFile):
+        return mesh_intervals(mesh if mesh is not None else shape_mesh(shape), origins, directions)
+    raise TypeError(f"unknown shape {shape!r}")

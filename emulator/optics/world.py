@@ -1,0 +1,168 @@
+"""`World`: a scene prepared for casting beams, and `cast` at any time t.
+
+The only module that talks to Embree (embreex). Solid objects are merged into
+one Embree triangle mesh with a per-triangle object id; Embree finds each
+beam's first triangle and the distance is then recomputed in float64 from that
+triangle's plane (Embree works in float32). Smoke regions use exact analytic
+chords (`chords.py`); plume particles are axis-aligned boxes met by a
+vectorised slab test over beams × particles.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+from embreex.mesh_construction import TriangleMesh
+from embreex.rtcore_scene import EmbreeScene
+
+from emulator.errors import SceneError
+from emulator.optics.chords import NO_HIT, shape_intervals, slab_intervals
+from emulator.optics.hits import BeamHits, RegionCrossing
+from emulator.scene.geometry import shape_mesh, world_mesh, world_to_local
+from emulator.scene.model import MeshFile, Scene
+from emulator.scene.plumes import Particles, particles_at
+
+_PAIRS_PER_CHUNK = 1_000_000  # beams × particles per slab-test batch
+
+
+class World:
+    """A scene ready for casting: build once per scene, cast at any time."""
+
+    def __init__(self, scene: Scene) -> None:
+        self.scene = scene
+        meshes = [world_mesh(obj.shape, obj.pose) for obj in scene.objects]
+        self._triangles = (
+            np.concatenate([m.triangles for m in meshes]) if meshes else np.zeros((0, 3, 3))
+        ).astype(np.float64)
+        self._triangle_object = np.concatenate(
+            [np.full(len(m.faces), i, dtype=np.int64) for i, m in enumerate(meshes)] or [np.zeros(0, np.int64)]
+        )
+        self._triangle_normals = (
+            np.concatenate([m.face_normals for m in meshes]) if meshes else np.zeros((0, 3))
+        ).astype(np.float64)
+        self._object_reflectivity = np.array([self._reflectivity(obj.material) for obj in scene.objects], dtype=float)
+        self._embree: EmbreeScene | None = None
+        if len(self._triangles):
+            self._embree = EmbreeScene()
+            TriangleMesh(self._embree, self._triangles.astype(np.float32))
+        self._region_meshes: dict[int, trimesh.Trimesh] = {
+            i: shape_mesh(region.shape) for i, region in enumerate(scene.regions) if isinstance(region.shape, MeshFile)
+        }
+
+    def _reflectivity(self, material: str) -> float:
+        if material not in self.scene.materials:
+            raise SceneError(f"{self.scene.name}: unknown material {material!r}")
+        return float(self.scene.materials[material].reflectivity)
+
+    def particles_at(self, time_s: float) -> Particles:
+        """All plumes' particles alive at `time_s`."""
+        return Particles.concatenate(
+            [particles_at(plume, self.scene.seed, i, time_s) for i, plume in enumerate(self.scene.plumes)]
+        )
+
+    def first_triangles(self, origins: np.ndarray, directions: np.ndarray, max_range_m: float) -> np.ndarray:
+        """Embree's first triangle index per ray within max_range_m (-1 for none): the plain INTERSECT."""
+        if self._embree is None:
+            return np.full(len(origins), -1, dtype=np.int64)
+        limits = np.full(len(origins), max_range_m, dtype=np.float32)
+        return self._embree.run(
+            np.ascontiguousarray(origins, dtype=np.float32),
+            np.ascontiguousarray(directions, dtype=np.float32),
+            dists=limits,
+        )
+
+    def cast(self, origins: np.ndarray, directions: np.ndarray, max_range_m: float, time_s: float) -> BeamHits:
+        """Cast beams from `origins` (N, 3) along `directions` (N, 3; normalised here) at `time_s`."""
+        origins = np.asarray(origins, dtype=float)
+        directions = np.asarray(directions, dtype=float)
+        directions = directions / np.linalg.norm(directions, axis=1, keepdims=True)
+        solid_range, object_index, reflectivity, cos_incidence = self._solids(origins, directions, max_range_m)
+        beam_end = np.minimum(solid_range, max_range_m)
+        regions = tuple(self._region_crossing(i, origins, directions, max_range_m, time_s) for i in range(len(self.scene.regions)))
+        optical_path = np.zeros(len(origins))
+        for crossing in regions:
+            if crossing.density:
+                optical_path += crossing.density * crossing.length_before(beam_end)
+        plume_range, plume_density = self._first_particle(origins, directions, beam_end, time_s)
+        return BeamHits(
+            time_s=time_s,
+            max_range_m=max_range_m,
+            solid_range_m=solid_range,
+            object_index=object_index,
+            reflectivity=reflectivity,
+            cos_incidence=cos_incidence,
+            region_optical_path=optical_path,
+            regions=regions,
+            plume_hit_range_m=plume_range,
+            plume_hit_density=plume_density,
+        )
+
+    def _solids(
+        self, origins: np.ndarray, directions: np.ndarray, max_range_m: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        triangle = self.first_triangles(origins, directions, max_range_m)
+        hit = triangle >= 0
+        safe = np.where(hit, triangle, 0)
+        solid_range = np.full(len(origins), np.inf)
+        object_index = np.full(len(origins), -1, dtype=np.int64)
+        reflectivity = np.zeros(len(origins))
+        cos_incidence = np.zeros(len(origins))
+        if not hit.any():
+            return solid_range, object_index, reflectivity, cos_incidence
+        normals = self._triangle_normals[safe]
+        facing = np.einsum("ij,ij->i", normals, directions)
+        vertex_offset = np.einsum("ij,ij->i", normals, self._triangles[safe, 0] - origins)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            exact_range = vertex_offset / facing
+        hit &= exact_range <= max_range_m
+        solid_range = np.where(hit, exact_range, np.inf)
+        objects = self._triangle_object[safe]
+        object_index = np.where(hit, objects, -1)
+        reflectivity = np.where(hit, self._object_reflectivity[objects], 0.0)
+        cos_incidence = np.where(hit, np.abs(facing), 0.0)
+        return solid_range, object_index, reflectivity, cos_incidence
+
+    def _region_crossing(
+        self, index: int, origins: np.ndarray, directions: np.ndarray, max_range_m: float, time_s: float
+    ) -> RegionCrossing:
+        region = self.scene.regions[index]
+        local_origins, local_directions = world_to_local(region.pose, origins, directions)
+        entry, exit_ = shape_intervals(region.shape, local_origins, local_directions, self._region_meshes.get(index))
+        entry = np.maximum(entry, 0.0)
+        exit_ = np.minimum(exit_, max_range_m)
+        missing = ~(exit_ > entry)
+        return RegionCrossing(
+            region_index=index,
+            density=float(region.density.at(time_s)),
+            entry_m=np.where(missing, NO_HIT, entry),
+            exit_m=np.where(missing, NO_HIT, exit_),
+        )
+
+    def _first_particle(
+        self, origins: np.ndarray, directions: np.ndarray, beam_end: np.ndarray, time_s: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Entry distance and density of the first particle box before each beam's end."""
+        first_range = np.full(len(origins), np.inf)
+        first_density = np.zeros(len(origins))
+        particles = self.particles_at(time_s)
+        if len(particles) == 0:
+            return first_range, first_density
+        lower = particles.centers - particles.half_sizes[:, None]
+        upper = particles.centers + particles.half_sizes[:, None]
+        ends = origins + directions * beam_end[:, None]
+        reach_lower = np.minimum(origins.min(axis=0), ends.min(axis=0))
+        reach_upper = np.maximum(origins.max(axis=0), ends.max(axis=0))
+        near_beams = np.all((upper >= reach_lower) & (lower <= reach_upper), axis=1)
+        lower, upper, density = lower[near_beams], upper[near_beams], particles.density[near_beams]
+        step = max(1, _PAIRS_PER_CHUNK // len(origins))
+        for start in range(0, len(lower), step):
+            near, far = slab_intervals(origins, directions, lower[start : start + step], upper[start : start + step])
+            entry = np.maximum(near, 0.0)
+            met = (far >= entry) & (entry < beam_end[:, None])
+            entry = np.where(met, entry, np.inf)
+            nearest = entry.argmin(axis=1)
+            nearest_range = entry[np.arange(len(origins)), nearest]
+            closer = nearest_range < first_range
+            first_range = np.where(closer, nearest_range, first_range)
+            first_density = np.where(closer, density[start : start + step][nearest], first_density)
+        return first_range, first_density

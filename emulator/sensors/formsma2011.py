@@ -1,0 +1,40 @@
+"""Preset `formsma2011`: the paper's rule, exactly (SMOKE_MODEL.md §2). Noiseless.
+
+URG-04LX: a beam whose smoke-region optical path before the solid surface
+exceeds the penetration power P = 0.0028 d × 2.5 m = 0.007 d·m (eq. 1, 2), or
+which meets a plume particle before the solid, returns error 1 (low reflected
+intensity); with nothing solid within 5.6 m it returns 0; otherwise the range
+in mm (a range that rounds below 20 mm returns 19, non-measurable distance).
+
+LMS200: smoke regions are transparent; a plume particle met before the solid
+is seen as a solid (its entry range is reported). A range beyond the unit's
+maximum (8183) returns 8183; nothing within 80 m returns 8191 (no echo).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from emulator.optics import BeamHits
+from emulator.sensors import lms200, urg04lx
+from emulator.sensors.response import Beams
+
+PENETRATION_POWER = 0.0028 * 2.5  # d·m, eq. (1)
+
+
+def urg_values(hits: BeamHits, beams: Beams) -> np.ndarray:
+    extinguished = hits.region_optical_path > PENETRATION_POWER
+    in_plume = np.isfinite(hits.plume_hit_range_m)
+    solid = np.isfinite(hits.solid_range_m)
+    millimetres = np.rint(np.where(solid, hits.solid_range_m, 0.0) * 1000.0).astype(np.int64)
+    values = np.where(millimetres < urg04lx.MIN_VALUE_MM, urg04lx.NON_MEASURABLE, millimetres)
+    values = np.where(solid, values, urg04lx.NO_ECHO)
+    return np.where(extinguished | in_plume, urg04lx.LOW_INTENSITY, values)
+
+
+def lms_values(hits: BeamHits, beams: Beams, unit: str) -> np.ndarray:
+    seen_range = np.minimum(hits.solid_range_m, hits.plume_hit_range_m)
+    echo = np.isfinite(seen_range)
+    counts = np.rint(np.where(echo, seen_range, 0.0) * lms200.UNITS_PER_M[unit]).astype(np.int64)
+    values = np.where(counts >= lms200.ABOVE_MAXIMUM, lms200.ABOVE_MAXIMUM, counts)
+    return np.where(echo, values, lms200.NO_ECHO)

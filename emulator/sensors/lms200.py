@@ -1,0 +1,60 @@
+"""The Sick LMS200: beam geometry, timing, range limits and error codes.
+
+Device angles run from 0 (right) through 90 (ahead) to 180 (left); the
+sensor-frame angle is the device angle − 90°. The mirror turns at 75 Hz; a
+0.5° scan interlaces two revolutions, 0.25° four. Values are distances in the
+scan's unit (mm or cm); 8183 = value above the mode's maximum, 8191 = no
+echo within the sensor's physical reach (80 m) (telegram listing §10.8).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from emulator.optics import World
+from emulator.scene.model import Scene, SensorSpec
+from emulator.sensors.beam_geometry import scan_plane_rays
+from emulator.sensors.response import Beams, response_model
+from emulator.sensors.scan import Scan
+
+MODEL = "lms200"
+PERIOD_S = 1.0 / 75.0  # one mirror revolution
+REACH_M = 80.0
+UNITS_PER_M = {"mm": 1000.0, "cm": 100.0}
+ABOVE_MAXIMUM = 8183
+NO_ECHO = 8191
+
+
+def device_angles_deg(start_deg: float, step_deg: float, count: int) -> np.ndarray:
+    return start_deg + step_deg * np.arange(count)
+
+
+class LmsSensor:
+    """A simulated LMS200: `scan(time_s, ...)` gives values for any device-angle grid."""
+
+    model = MODEL
+    period_s = PERIOD_S
+
+    def __init__(self, scene: Scene, spec: SensorSpec, world: World) -> None:
+        self.scene, self.spec, self.world = scene, spec, world
+        self.name = spec.name
+        self._response = response_model(scene.model)
+
+    def scan(
+        self, time_s: float, *, start_deg: float = 0.0, step_deg: float = 0.5, count: int = 361, unit: str = "mm"
+    ) -> Scan:
+        """Values at device angles start_deg + i·step_deg (i < count), in `unit`, at `time_s`."""
+        if unit not in UNITS_PER_M:
+            raise ValueError(f"unit must be one of {sorted(UNITS_PER_M)}, got {unit!r}")
+        angles_rad = np.radians(device_angles_deg(start_deg, step_deg, count) - 90.0)
+        origins, directions = scan_plane_rays(self.spec.pose, angles_rad)
+        hits = self.world.cast(origins, directions, REACH_M, time_s)
+        beams = Beams(self.scene, self.spec, self.world, time_s, angles_rad, origins, directions)
+        values = np.asarray(self._response.lms_values(hits, beams, unit), dtype=np.int64)
+        return Scan(self.name, MODEL, time_s, angles_rad, values, unit)
+
+
+def ranges_m(values: np.ndarray, unit: str) -> np.ndarray:
+    """Metres per value, NaN for the codes 8183..8191."""
+    values = np.asarray(values)
+    return np.where(values < ABOVE_MAXIMUM, values / UNITS_PER_M[unit], np.nan)

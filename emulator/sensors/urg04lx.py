@@ -1,0 +1,67 @@
+"""The Hokuyo URG-04LX: beam geometry, timing, range limits and error codes.
+
+Steps 0..768 at 2π/1024 rad each, step 384 straight ahead, positive to the
+left (SCIP: ARES 1024, AFRT 384). Only steps 44..725 (AMIN..AMAX) are measured;
+the others carry `OUTSIDE_VALID_AREA` so a client asking for them gets a
+defined value. Error codes (< 20, SCIP spec): 0 no echo ("object possibly at
+22 m"), 1 low reflected intensity (smoke), 19 non-measurable distance (closer
+than DMIN = 20 mm).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from emulator.optics import World
+from emulator.scene.model import Scene, SensorSpec
+from emulator.sensors.beam_geometry import scan_plane_rays
+from emulator.sensors.response import Beams, response_model
+from emulator.sensors.scan import Scan
+
+MODEL = "urg-04lx"
+STEPS = 769
+STEPS_PER_REVOLUTION = 1024
+FRONT_STEP = 384
+FIRST_VALID_STEP, LAST_VALID_STEP = 44, 725
+PERIOD_S = 0.1  # 600 rpm
+MAX_RANGE_M = 5.6  # DMAX 5600 mm
+MIN_VALUE_MM = 20  # DMIN; values below 20 are error codes
+
+NO_ECHO = 0
+LOW_INTENSITY = 1
+NON_MEASURABLE = 19
+OUTSIDE_VALID_AREA = NO_ECHO
+
+
+def step_angles_rad() -> np.ndarray:
+    """Sensor-frame angle of every step 0..768."""
+    return (np.arange(STEPS) - FRONT_STEP) * (2.0 * np.pi / STEPS_PER_REVOLUTION)
+
+
+class UrgSensor:
+    """A simulated URG-04LX: `scan(time_s)` gives the 769 values of steps 0..768."""
+
+    model = MODEL
+    period_s = PERIOD_S
+
+    def __init__(self, scene: Scene, spec: SensorSpec, world: World) -> None:
+        self.scene, self.spec, self.world = scene, spec, world
+        self.name = spec.name
+        self.angles_rad = step_angles_rad()
+        self._valid = slice(FIRST_VALID_STEP, LAST_VALID_STEP + 1)
+        self._origins, self._directions = scan_plane_rays(spec.pose, self.angles_rad[self._valid])
+        self._response = response_model(scene.model)
+
+    def scan(self, time_s: float) -> Scan:
+        """The scan completed at simulated time `time_s` (the world evaluated at that instant)."""
+        hits = self.world.cast(self._origins, self._directions, MAX_RANGE_M, time_s)
+        beams = Beams(self.scene, self.spec, self.world, time_s, self.angles_rad[self._valid], self._origins, self._directions)
+        values = np.full(STEPS, OUTSIDE_VALID_AREA, dtype=np.int64)
+        values[self._valid] = self._response.urg_values(hits, beams)
+        return Scan(self.name, MODEL, time_s, self.angles_rad, values, "mm")
+
+
+def ranges_m(values: np.ndarray) -> np.ndarray:
+    """Metres per value, NaN for error codes."""
+    values = np.asarray(values)
+    return np.where(values >= MIN_VALUE_MM, values / 1000.0, np.nan)
