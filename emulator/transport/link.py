@@ -1,0 +1,133 @@
+"""One connected client on a non-blocking file descriptor (a pty master or a TCP socket).
+
+Reads go to the session; outputs go through an `Outbox`, written in order
+without ever blocking the loop: paced writes wake on a timer, a full kernel
+buffer wakes on writability. Both transports use this; they differ only in
+how a client arrives and leaves.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Callable
+
+from emulator.transport import Session
+from emulator.transport.outbox import DEFAULT_LIMIT_BYTES, Outbox
+from protocols.device import Output
+
+READ_SIZE = 65536
+
+
+class Link:
+    """Bytes between one client and its session until the client goes away.
+
+    `read()` returns received bytes (b"" at end of stream) and `write(data)`
+    the count written; both may raise BlockingIOError, and any other OSError
+    (EIO on a pty master, ECONNRESET) means the client is gone. `accepts_input()`
+    lets a transport discard bytes (a pty client at the wrong baud).
+    `on_lost` runs once when the client goes away; `close()` never calls it.
+    """
+
+    def __init__(
+        self,
+        loop: asyncio.AbstractEventLoop,
+        fd: int,
+        *,
+        read: Callable[[], bytes],
+        write: Callable[[bytes], int],
+        session: Session,
+        on_lost: Callable[[], None],
+        accepts_input: Callable[[], bool] = lambda: True,
+        limit_bytes: int = DEFAULT_LIMIT_BYTES,
+    ) -> None:
+        self.outbox = Outbox(limit_bytes)
+        self.discarded_input = 0  # bytes dropped: wrong baud, or replies piling up unread
+        self._loop = loop
+        self._fd = fd
+        self._read = read
+        self._write = write
+        self._session = session
+        self._on_lost = on_lost
+        self._accepts_input = accepts_input
+        self._pace_timer: asyncio.TimerHandle | None = None
+        self._waiting_writable = False
+        self._open = True
+        loop.add_reader(fd, self._on_readable)
+
+    @property
+    def is_open(self) -> bool:
+        return self._open
+
+    def send(self, outputs: list[Output]) -> None:
+        if not self._open:
+            return
+        for output in outputs:
+            self.outbox.put(output)
+        self._pump()
+
+    def close(self) -> None:
+        """Stop reading and writing; unsent output is discarded."""
+        if not self._open:
+            return
+        self._open = False
+        self._loop.remove_reader(self._fd)
+        if self._waiting_writable:
+            self._loop.remove_writer(self._fd)
+            self._waiting_writable = False
+        if self._pace_timer is not None:
+            self._pace_timer.cancel()
+            self._pace_timer = None
+        self.outbox.clear()
+
+    def _lost(self) -> None:
+        if self._open:
+            self.close()
+            self._on_lost()
+
+    def _on_readable(self) -> None:
+        try:
+            data = self._read()
+        except BlockingIOError:
+            return
+        except OSError:
+            data = b""
+        if not data:
+            self._lost()
+            return
+        if self.outbox.pending_bytes > self.outbox.limit_bytes or not self._accepts_input():
+            self.discarded_input += len(data)
+            return
+        self._session.received(data)
+
+    def _on_writable(self) -> None:
+        self._loop.remove_writer(self._fd)
+        self._waiting_writable = False
+        self._pump()
+
+    def _on_pace_timer(self) -> None:
+        self._pace_timer = None
+        self._pump()
+
+    def _pump(self) -> None:
+        """Write as much as pacing and the kernel allow, then arrange to be called again."""
+        if not self._open or self._waiting_writable or self._pace_timer is not None:
+            return
+        now = self._loop.time()
+        while True:
+            data, wake_at = self.outbox.chunk(now)
+            if not data:
+                if wake_at is not None:
+                    self._pace_timer = self._loop.call_at(wake_at, self._on_pace_timer)
+                return
+            try:
+                written = self._write(data)
+            except BlockingIOError:
+                written = 0
+            except OSError:
+                self._lost()
+                return
+            self.outbox.consume(written)
+            if written < len(data):
+                self._loop.add_writer(self._fd, self._on_writable)
+                self._waiting_writable = True
+                return

@@ -1,0 +1,101 @@
+"""Whole messages waiting for one client: bounded, written in order, paced at their baud.
+
+Shared by every transport. The outbox decides *what* may be written *when*
+(wall time); the link that owns it does the writing.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+from protocols.device import Output
+
+BITS_PER_BYTE = 10  # 8N1: start bit, 8 data bits, stop bit
+PACE_QUANTUM_S = 0.005  # a paced line is fed this far ahead, so bytes leave in ≈ 5 ms chunks
+CATCH_UP_S = 0.02  # a late wake-up may catch up this much; a longer pause means the line idled
+DEFAULT_LIMIT_BYTES = 16 * 1024
+
+
+@dataclass
+class _Pending:
+    output: Output
+    sent: int = 0
+
+
+class Outbox:
+    """Outputs not yet written, with the line-rate schedule of what was.
+
+    Bounded: when more than `limit_bytes` wait (the client is not reading),
+    whole droppable outputs that have not started are dropped, oldest first,
+    like a real device whose full line skips scans. Replies are never dropped.
+    """
+
+    def __init__(self, limit_bytes: int = DEFAULT_LIMIT_BYTES) -> None:
+        self.limit_bytes = limit_bytes
+        self.dropped = 0  # whole outputs dropped because the client was not reading
+        self._queue: deque[_Pending] = deque()
+        self._pending_bytes = 0
+        self._line_free_at = float("-inf")  # wall time the paced bytes written so far have left
+
+    @property
+    def pending_bytes(self) -> int:
+        return self._pending_bytes
+
+    def __bool__(self) -> bool:
+        return bool(self._queue)
+
+    def put(self, output: Output) -> None:
+        """Queue one whole output; an interrupting one first discards all unsent output."""
+        if output.interrupt:
+            self.clear()
+        if not output.data:
+            return
+        self._queue.append(_Pending(output))
+        self._pending_bytes += len(output.data)
+        if self._pending_bytes > self.limit_bytes:
+            self._shed()
+
+    def clear(self) -> None:
+        """Forget everything unsent (interrupt, or the client went away)."""
+        self._queue.clear()
+        self._pending_bytes = 0
+
+    def chunk(self, now: float) -> tuple[bytes, float | None]:
+        """What may be written at wall time `now`: (bytes, None), or (b"", wake-up time)
+        when pacing holds the line, or (b"", None) when nothing waits."""
+        if not self._queue:
+            return b"", None
+        head = self._queue[0]
+        remaining = memoryview(head.output.data)[head.sent :]
+        baud = head.output.baud
+        if baud is None:
+            return bytes(remaining), None
+        if self._line_free_at > now:
+            return b"", self._line_free_at
+        if self._line_free_at < now - CATCH_UP_S:
+            self._line_free_at = now
+        allowed = int((now + PACE_QUANTUM_S - self._line_free_at) * baud / BITS_PER_BYTE)
+        return bytes(remaining[: max(1, allowed)]), None
+
+    def consume(self, count: int) -> None:
+        """`count` bytes of the head output were written."""
+        if count <= 0:
+            return
+        head = self._queue[0]
+        head.sent += count
+        self._pending_bytes -= count
+        if head.output.baud is not None:
+            self._line_free_at += count * BITS_PER_BYTE / head.output.baud
+        if head.sent >= len(head.output.data):
+            self._queue.popleft()
+
+    def _shed(self) -> None:
+        kept: deque[_Pending] = deque()
+        for item in self._queue:
+            if self._pending_bytes > self.limit_bytes and item.sent == 0 and item.output.droppable:
+                self._pending_bytes -= len(item.output.data)
+                self.dropped += 1
+            else:
+                kept.append(item)
+        self._queue = kept

@@ -1,0 +1,167 @@
+"""A virtual serial device: a pty whose slave is published under a symlink.
+
+The daemon does not keep the slave open, so the master tells whether a client
+has it open: with none, reads fail with EIO and poll() reports POLLHUP. While
+no client is there we watch for one every `PRESENCE_POLL_S` (a master with no
+slave is always "readable", so it cannot stay registered with the loop).
+`tcgetattr(master)` returns the slave's termios: the client's baud.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import errno
+import os
+import re
+import select
+import termios
+import tty
+from pathlib import Path
+
+from emulator.errors import UserError
+from emulator.transport import PtyAddress, Session
+from emulator.transport.link import READ_SIZE, Link
+from emulator.transport.outbox import DEFAULT_LIMIT_BYTES
+from protocols.device import Output
+
+PRESENCE_POLL_S = 0.015
+
+# termios speed constant (B9600, B500000, ...) → bits per second
+BAUD_OF_SPEED: dict[int, int] = {
+    getattr(termios, name): int(name[1:]) for name in dir(termios) if re.fullmatch(r"B\d+", name)
+}
+
+
+class PtyEndpoint:
+    """Serves one session on a pty published at `address.path`.
+
+    Received bytes are discarded while the client's termios speed differs from
+    the session's baud (a wrong-rate line garbles). When the client closes the
+    slave, the session is told once, unsent output and anything still queued
+    in the pty are discarded, and the endpoint waits for the next client.
+    """
+
+    def __init__(
+        self,
+        address: PtyAddress,
+        session: Session,
+        *,
+        limit_bytes: int = DEFAULT_LIMIT_BYTES,
+    ) -> None:
+        self.address = address
+        self.link_path = Path(address.path).absolute()
+        self.slave_name = ""
+        self.clients_served = 0
+        self._session = session
+        self._limit_bytes = limit_bytes
+        self._master = -1
+        self._hangup_poller = select.poll()
+        self._link: Link | None = None
+        self._presence_timer: asyncio.TimerHandle | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+
+    @property
+    def connected(self) -> bool:
+        return self._link is not None
+
+    @property
+    def link(self) -> Link | None:
+        return self._link
+
+    def open(self, loop: asyncio.AbstractEventLoop) -> str:
+        """Create the pty and its symlink; returns the slave's name (/dev/pts/N)."""
+        self._loop = loop
+        self._remove_stale_link()
+        master, slave = os.openpty()
+        try:
+            tty.setraw(slave)  # no echo, no CR/LF rewriting: raw bytes both ways
+            self.slave_name = os.ttyname(slave)
+        finally:
+            os.close(slave)
+        os.set_blocking(master, False)
+        self._master = master
+        self._hangup_poller.register(master, select.POLLHUP)
+        try:
+            os.symlink(self.slave_name, self.link_path)
+        except OSError as error:
+            self.close()
+            raise UserError(f"{self.address}: cannot create {self.link_path}: {error.strerror}") from None
+        self._watch_for_client()
+        return self.slave_name
+
+    def send(self, outputs: list[Output]) -> None:
+        """Queue outputs for the client; with no client they are discarded."""
+        if self._link is not None:
+            self._link.send(outputs)
+
+    def close(self) -> None:
+        """Close the pty and remove the symlink (only if it is still ours)."""
+        if self._presence_timer is not None:
+            self._presence_timer.cancel()
+            self._presence_timer = None
+        if self._link is not None:
+            self._link.close()
+            self._link = None
+        if self._master >= 0:
+            self._hangup_poller.unregister(self._master)
+            os.close(self._master)
+            self._master = -1
+        if self.slave_name and os.path.islink(self.link_path):
+            if os.readlink(self.link_path) == self.slave_name:
+                os.unlink(self.link_path)
+
+    def client_baud(self) -> int | None:
+        """The speed the client set on its end of the pty (bits per second)."""
+        speed = termios.tcgetattr(self._master)[5]
+        return BAUD_OF_SPEED.get(speed)
+
+    def _remove_stale_link(self) -> None:
+        if os.path.islink(self.link_path):
+            os.unlink(self.link_path)
+        elif self.link_path.exists():
+            raise UserError(f"{self.address}: {self.link_path} exists and is not a symlink")
+
+    def _client_present(self) -> bool:
+        return not any(event & select.POLLHUP for _, event in self._hangup_poller.poll(0))
+
+    def _watch_for_client(self) -> None:
+        self._presence_timer = None
+        if self._master < 0:
+            return
+        if self._client_present():
+            self.clients_served += 1
+            self._link = Link(
+                self._loop,
+                self._master,
+                read=lambda: os.read(self._master, READ_SIZE),
+                write=lambda data: os.write(self._master, data),
+                session=self._session,
+                on_lost=self._client_left,
+                accepts_input=self._baud_matches,
+                limit_bytes=self._limit_bytes,
+            )
+        else:
+            self._presence_timer = self._loop.call_later(PRESENCE_POLL_S, self._watch_for_client)
+
+    def _baud_matches(self) -> bool:
+        baud = self._session.baud
+        return baud is None or self.client_baud() == baud
+
+    def _client_left(self) -> None:
+        self._link = None
+        self._discard_queued_bytes()
+        self._session.disconnected()
+        self._watch_for_client()
+
+    def _discard_queued_bytes(self) -> None:
+        """Bytes still in the pty would reach the next client: flush them from the slave side."""
+        try:
+            slave = os.open(self.slave_name, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        except OSError as error:
+            if error.errno in (errno.ENOENT, errno.EIO):
+                return
+            raise
+        try:
+            termios.tcflush(slave, termios.TCIOFLUSH)
+        finally:
+            os.close(slave)

@@ -1,0 +1,119 @@
+"""TCP: the URG's Ethernet models on port 10940, or a serial-to-Ethernet converter.
+
+One client at a time. A second connection while one is open is refused: it
+is accepted and closed at once (the client sees end-of-stream), so a running
+client is never hijacked. There is no termios: output is paced at each
+Output's baud, and baud commands are followed by the device logically.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+
+from emulator.errors import UserError
+from emulator.transport import Session, TcpAddress
+from emulator.transport.link import READ_SIZE, Link
+from emulator.transport.outbox import DEFAULT_LIMIT_BYTES
+from protocols.device import Output
+
+
+class TcpEndpoint:
+    """Serves one session on a listening TCP socket."""
+
+    def __init__(
+        self,
+        address: TcpAddress,
+        session: Session,
+        *,
+        limit_bytes: int = DEFAULT_LIMIT_BYTES,
+    ) -> None:
+        self.address = address
+        self.bound: TcpAddress | None = None
+        self.clients_served = 0
+        self.refused = 0
+        self._session = session
+        self._limit_bytes = limit_bytes
+        self._listener: socket.socket | None = None
+        self._client: socket.socket | None = None
+        self._link: Link | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+
+    @property
+    def connected(self) -> bool:
+        return self._link is not None
+
+    @property
+    def link(self) -> Link | None:
+        return self._link
+
+    def open(self, loop: asyncio.AbstractEventLoop) -> TcpAddress:
+        """Bind and listen; returns the bound address (the real port when 0 was asked)."""
+        self._loop = loop
+        try:
+            family, kind, proto, _, sockaddr = socket.getaddrinfo(
+                self.address.host, self.address.port, type=socket.SOCK_STREAM
+            )[0]
+            listener = socket.socket(family, kind, proto)
+        except OSError as error:
+            raise UserError(f"{self.address}: {error.strerror or error}") from None
+        try:
+            listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            listener.bind(sockaddr)
+            listener.listen(1)
+        except OSError as error:
+            listener.close()
+            raise UserError(f"{self.address}: {error.strerror}") from None
+        listener.setblocking(False)
+        self._listener = listener
+        self.bound = TcpAddress(self.address.host, listener.getsockname()[1])
+        loop.add_reader(listener.fileno(), self._accept)
+        return self.bound
+
+    def send(self, outputs: list[Output]) -> None:
+        """Queue outputs for the client; with no client they are discarded."""
+        if self._link is not None:
+            self._link.send(outputs)
+
+    def close(self) -> None:
+        self._drop_client()
+        if self._listener is not None:
+            self._loop.remove_reader(self._listener.fileno())
+            self._listener.close()
+            self._listener = None
+
+    def _accept(self) -> None:
+        try:
+            client, _ = self._listener.accept()
+        except (BlockingIOError, InterruptedError, ConnectionAbortedError):
+            return
+        if self._link is not None:
+            self.refused += 1
+            client.close()
+            return
+        client.setblocking(False)
+        client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        client.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
+        self.clients_served += 1
+        self._client = client
+        self._link = Link(
+            self._loop,
+            client.fileno(),
+            read=lambda: client.recv(READ_SIZE),
+            write=client.send,
+            session=self._session,
+            on_lost=self._client_left,
+            limit_bytes=self._limit_bytes,
+        )
+
+    def _client_left(self) -> None:
+        self._drop_client()
+        self._session.disconnected()
+
+    def _drop_client(self) -> None:
+        if self._link is not None:
+            self._link.close()
+            self._link = None
+        if self._client is not None:
+            self._client.close()
+            self._client = None
