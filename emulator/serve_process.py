@@ -1,0 +1,178 @@
+"""The real `lrf-emulator serve` as a child process, for interop tests and benchmarks.
+
+Measurements and interop checks must see what a driver sees: the installed
+daemon, its ptys and sockets, its line pacing. This starts it on the given
+endpoints, waits for its `ready SENSOR MODEL URI[ -> /dev/pts/N]` lines
+(CLI.md) and stops it with SIGTERM, as a service manager would.
+"""
+
+from __future__ import annotations
+
+import queue
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+
+class ServeError(RuntimeError):
+    """The daemon did not come up as CLI.md promises."""
+
+
+@dataclass(frozen=True)
+class ReadyEndpoint:
+    """One `ready` line: a sensor served on one endpoint."""
+
+    sensor: str
+    model: str
+    uri: str
+    device: str | None = None  # the pty's /dev/pts/N, for a pty endpoint
+
+    @property
+    def path(self) -> str:
+        """What a client opens: the pty symlink, or HOST:PORT for TCP."""
+        return self.uri.split(":", 1)[1]
+
+    @property
+    def address(self) -> tuple[str, int]:
+        """(host, port) of a TCP endpoint."""
+        scheme, host, port = self.uri.split(":")
+        if scheme != "tcp":
+            raise ValueError(f"not a TCP endpoint: {self.uri}")
+        return host, int(port)
+
+
+def parse_ready_line(line: str) -> ReadyEndpoint | None:
+    """`ready urg urg-04lx pty:/tmp/x -> /dev/pts/3` → ReadyEndpoint; other lines → None."""
+    words = line.split()
+    if len(words) == 4 and words[0] == "ready":
+        return ReadyEndpoint(words[1], words[2], words[3])
+    if len(words) == 6 and words[0] == "ready" and words[4] == "->":
+        return ReadyEndpoint(words[1], words[2], words[3], words[5])
+    return None
+
+
+def free_tcp_port(host: str = "127.0.0.1") -> int:
+    """A port nothing listens on right now (the OS picks it)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        probe.bind((host, 0))
+        return probe.getsockname()[1]
+
+
+def serve_command() -> list[str]:
+    """The installed console script beside this interpreter, else `python -m emulator.cli`."""
+    script = Path(sys.executable).with_name("lrf-emulator")
+    return [str(script)] if script.exists() else [sys.executable, "-m", "emulator.cli"]
+
+
+class ServeProcess:
+    """`lrf-emulator serve SCENE --endpoint SENSOR=URI ...`, running until `stop()`.
+
+    `endpoints` are `SENSOR=URI` strings; the constructor returns once one
+    ready line per endpoint has been printed, and raises ServeError (with the
+    daemon's stderr) if it exits or stays silent for `timeout_s`.
+    """
+
+    def __init__(
+        self,
+        scene: str | Path,
+        endpoints: Sequence[str],
+        *,
+        extra_args: Sequence[str] = (),
+        timeout_s: float = 30.0,
+        cwd: str | Path | None = None,
+    ) -> None:
+        self.args = [*serve_command(), "serve", str(scene)]
+        for endpoint in endpoints:
+            self.args += ["--endpoint", endpoint]
+        self.args += list(extra_args)
+        self.ready: list[ReadyEndpoint] = []
+        self._stdout_lines: queue.Queue[str | None] = queue.Queue()
+        self._stderr_chunks: list[str] = []
+        self.process = subprocess.Popen(
+            self.args, cwd=cwd, stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1,
+        )
+        self._readers = [
+            threading.Thread(target=self._pump_stdout, daemon=True),
+            threading.Thread(target=self._pump_stderr, daemon=True),
+        ]
+        for reader in self._readers:
+            reader.start()
+        try:
+            self._wait_ready(len(endpoints), timeout_s)
+        except BaseException:
+            self.stop()
+            raise
+
+    @property
+    def pid(self) -> int:
+        return self.process.pid
+
+    @property
+    def stderr(self) -> str:
+        return "".join(self._stderr_chunks)
+
+    def endpoint(self, sensor: str, scheme: str | None = None) -> ReadyEndpoint:
+        """The ready endpoint of `sensor` (of the given scheme: "pty" or "tcp")."""
+        for ready in self.ready:
+            if ready.sensor == sensor and (scheme is None or ready.uri.startswith(scheme + ":")):
+                return ready
+        raise KeyError(f"{sensor} ({scheme or 'any'}) not among {self.ready}")
+
+    def stop(self, timeout_s: float = 10.0) -> int:
+        """SIGTERM, then wait: the daemon's exit status (SIGKILL and ServeError if it hangs)."""
+        if self.process.poll() is None:
+            self.process.send_signal(signal.SIGTERM)
+            try:
+                self.process.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+                raise ServeError(f"serve ignored SIGTERM for {timeout_s} s; killed") from None
+        for reader in self._readers:
+            reader.join(timeout_s)
+        return self.process.returncode
+
+    def __enter__(self) -> ServeProcess:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.stop()
+
+    def _pump_stdout(self) -> None:
+        assert self.process.stdout is not None
+        for line in self.process.stdout:
+            self._stdout_lines.put(line)
+        self._stdout_lines.put(None)
+
+    def _pump_stderr(self) -> None:
+        assert self.process.stderr is not None
+        for line in self.process.stderr:
+            self._stderr_chunks.append(line)
+
+    def _wait_ready(self, count: int, timeout_s: float) -> None:
+        deadline = time.monotonic() + timeout_s
+        while len(self.ready) < count:
+            remaining = deadline - time.monotonic()
+            try:
+                line = self._stdout_lines.get(timeout=max(remaining, 0.0))
+            except queue.Empty:
+                raise ServeError(
+                    f"{count - len(self.ready)} endpoint(s) not ready after {timeout_s} s: "
+                    f"{' '.join(self.args)}\n{self.stderr}"
+                ) from None
+            if line is None:
+                self.process.wait()
+                raise ServeError(
+                    f"serve exited with status {self.process.returncode} before it was ready: "
+                    f"{' '.join(self.args)}\n{self.stderr}"
+                )
+            ready = parse_ready_line(line)
+            if ready is not None:
+                self.ready.append(ready)
