@@ -1,0 +1,374 @@
+"""`UrgDevice`: a Hokuyo URG-04LX speaking SCIP 2.0 (optionally booting in 1.1).
+
+A sans-I/O state machine: bytes and simulated time in, whole messages out.
+Facts: ../shared/protocols/SCIP_URG04LX.md; choices where they are silent:
+docs/scip.md.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from protocols.device import Output
+from protocols.scip import scip1
+from protocols.scip.encoding import checksum, cluster_minimum, data_lines, encode_values
+from protocols.scip.framing import Line, LineSplitter
+from protocols.scip.identity import (
+    DEFAULT_BIT_RATE,
+    DEFAULT_SERIAL,
+    Status,
+    parameter_body,
+    status_body,
+    version_body,
+)
+from protocols.scip.requests import (
+    SCAN_PARAMETER_CHARS,
+    STREAM_PARAMETER_CHARS,
+    ScanRequest,
+    parse_scan_request,
+)
+
+SCANS_PER_SECOND = 10  # 600 rpm: scan k completes at k / 10 s
+TIMER_MODULUS = 1 << 24  # the 24-bit millisecond timer
+MAX_BACKLOG_SCANS = 10  # a poll that comes very late streams only the newest scans
+BIT_RATES = frozenset({19200, 38400, 57600, 115200, 250000, 500000, 750000})
+MAX_SPEED_LEVEL = 10
+DEFAULT_SPEED_CODE = 99  # CR99: back to the initial speed, like CR00
+MAX_TAG_CHARS = 16
+TAG_CHARS = frozenset(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789 ._+@")
+BOOT_PROTOCOLS = ("scip2", "scip1")
+
+# command → parameter characters before the optional ;tag
+PARAMETER_CHARS = {
+    b"BM": 0, b"QT": 0, b"RS": 0, b"VV": 0, b"PP": 0, b"II": 0,
+    b"TM": 1, b"HS": 1, b"CR": 2, b"SS": 6,
+    b"GD": SCAN_PARAMETER_CHARS, b"GS": SCAN_PARAMETER_CHARS,
+    b"MD": STREAM_PARAMETER_CHARS, b"MS": STREAM_PARAMETER_CHARS,
+}  # fmt: skip
+VALUE_CHARS = {b"GD": 3, b"MD": 3, b"GS": 2, b"MS": 2}
+ADJUST_MODE_COMMANDS = frozenset({b"TM", b"RS", b"VV", b"PP", b"II"})
+
+
+class DeviceScan(Protocol):
+    """What the device needs of a scan: 769 values (steps 0..768) and its time."""
+
+    @property
+    def values(self) -> np.ndarray: ...
+
+    @property
+    def timestamp_ms(self) -> int: ...
+
+
+ScanSource = Callable[[float], DeviceScan]
+
+
+@dataclass
+class _Stream:
+    """An MD/MS in progress."""
+
+    command: bytes  # b"MD" or b"MS"
+    request: ScanRequest
+    tag_suffix: bytes  # b"" or b";" + tag, echoed on every scan
+    next_index: int  # scan index of the next message
+    remaining: int | None  # None while unlimited
+
+
+class UrgDevice:
+    """One client session with a virtual URG-04LX.
+
+    `scan_source(t)` returns the scan completed at grid time t = k / 10 s.
+    `now` is simulated seconds; the device timer reads
+    (now - epoch) in ms mod 2^24, the epoch being `start_time` until RS.
+    """
+
+    def __init__(
+        self,
+        scan_source: ScanSource,
+        *,
+        serial: str = DEFAULT_SERIAL,
+        boot_protocol: str = "scip2",
+        start_time: float = 0.0,
+    ) -> None:
+        if boot_protocol not in BOOT_PROTOCOLS:
+            raise ValueError(f"boot_protocol must be one of {BOOT_PROTOCOLS}, got {boot_protocol!r}")
+        self._scan_source = scan_source
+        self._serial = serial
+        self._boot_protocol = boot_protocol
+        self._epoch_ms = _milliseconds(start_time)
+        self._lines = LineSplitter()
+        self._power_on_settings()
+
+    # --- protocols.device.Device -------------------------------------------
+
+    @property
+    def baud(self) -> int | None:
+        """None: the URG-04LX's USB link is unpaced (SS is only reported)."""
+        return None
+
+    def receive(self, data: bytes, now: float) -> list[Output]:
+        """Scans due before `now` first, then one reply per complete line."""
+        outputs = self.poll(now)
+        for line in self._lines.feed(data):
+            outputs.append(Output(self._reply(line, now)))
+        return outputs
+
+    def poll(self, now: float) -> list[Output]:
+        """Streamed MD/MS scans that have come due by `now`."""
+        stream = self._stream
+        if stream is None:
+            return []
+        latest = _latest_scan_index(now)
+        if stream.next_index > latest:
+            return []
+        period = stream.request.interval + 1
+        due = (latest - stream.next_index) // period + 1
+        self._skip(stream, max(due - MAX_BACKLOG_SCANS, 0))
+        outputs = []
+        while self._stream is stream and stream.next_index <= latest:
+            outputs.append(Output(self._stream_message(stream), droppable=True))
+        return outputs
+
+    def next_deadline(self) -> float | None:
+        return None if self._stream is None else self._stream.next_index / SCANS_PER_SECOND
+
+    def connection_lost(self) -> None:
+        """The next client finds a freshly booted device; only the timer runs on."""
+        self._lines.reset()
+        self._power_on_settings()
+
+    # --- state read by the daemon ---------------------------------------------
+
+    @property
+    def laser_on(self) -> bool:
+        return self._laser_on
+
+    @property
+    def high_sensitivity(self) -> bool:
+        """HS1 in force (the sensor model may use it)."""
+        return self._high_sensitivity
+
+    # --- state ----------------------------------------------------------------
+
+    def _power_on_settings(self) -> None:
+        self._protocol = self._boot_protocol
+        self._laser_on = False
+        self._adjust_mode = False
+        self._stream: _Stream | None = None
+        self._speed_level = 0
+        self._bit_rate = DEFAULT_BIT_RATE
+        self._high_sensitivity = False
+
+    def _timer_ms(self, now: float) -> int:
+        return (_milliseconds(now) - self._epoch_ms) % TIMER_MODULUS
+
+    def _stamp(self, scan: DeviceScan) -> bytes:
+        stamp = (int(scan.timestamp_ms) - self._epoch_ms) % TIMER_MODULUS
+        return _checked(encode_values(np.array([stamp]), 4))
+
+    # --- dispatch ---------------------------------------------------------------
+
+    def _reply(self, line: Line, now: float) -> bytes:
+        if self._protocol == "scip1":
+            return self._scip1_reply(line, now)
+        if line.overlong:
+            return _reply(line.text, b"0B")
+        command, _, tag = line.text.partition(b";")
+        code, params = command[:2], command[2:]
+        has_tag = b";" in line.text
+        if code not in PARAMETER_CHARS:
+            return _reply(line.text, b"0E")
+        if has_tag and len(tag) > MAX_TAG_CHARS:
+            return _reply(line.text, b"0G")
+        if has_tag and not TAG_CHARS.issuperset(tag):
+            return _reply(line.text, b"0H")
+        if self._adjust_mode and code not in ADJUST_MODE_COMMANDS:
+            return _reply(line.text, b"0E")
+        expected = PARAMETER_CHARS[code]
+        if len(params) < expected:
+            return _reply(line.text, b"0C")
+        if len(params) > expected:
+            return _reply(line.text, b"0D")
+        return self._execute(code, params, line.text, b";" + tag if has_tag else b"", now)
+
+    def _execute(self, code: bytes, params: bytes, echo: bytes, tag_suffix: bytes, now: float) -> bytes:
+        if code == b"VV":
+            return _reply(echo, b"00", version_body(self._serial))
+        if code == b"PP":
+            return _reply(echo, b"00", parameter_body())
+        if code == b"II":
+            status = Status(self._laser_on, self._speed_level, self._bit_rate, self._timer_ms(now))
+            return _reply(echo, b"00", status_body(status))
+        if code == b"BM":
+            if self._laser_on:
+                return _reply(echo, b"02")
+            self._laser_on = True
+            return _reply(echo, b"00")
+        if code == b"QT":
+            self._stream, self._laser_on = None, False
+            return _reply(echo, b"00")
+        if code == b"RS":
+            self._power_on_settings()
+            self._protocol = "scip2"
+            self._epoch_ms = _milliseconds(now)
+            return _reply(echo, b"00")
+        if code == b"TM":
+            return self._time_adjust(params, echo, now)
+        if code == b"SS":
+            return _reply(echo, self._set_bit_rate(params))
+        if code == b"CR":
+            return _reply(echo, self._set_speed(params))
+        if code == b"HS":
+            return _reply(echo, self._set_sensitivity(params))
+        if code in (b"GD", b"GS"):
+            return self._latest_scan(code, params, echo, now)
+        return self._start_stream(code, params, echo, tag_suffix, now)
+
+    # --- commands ---------------------------------------------------------------
+
+    def _time_adjust(self, params: bytes, echo: bytes, now: float) -> bytes:
+        if params == b"0":
+            if self._adjust_mode:
+                return _reply(echo, b"02")
+            self._adjust_mode, self._laser_on, self._stream = True, False, None
+            return _reply(echo, b"00")
+        if params == b"1":
+            if not self._adjust_mode:
+                return _reply(echo, b"04")
+            return _reply(echo, b"00", _checked(encode_values(np.array([self._timer_ms(now)]), 4)))
+        if params == b"2":
+            if not self._adjust_mode:
+                return _reply(echo, b"03")
+            self._adjust_mode = False
+            return _reply(echo, b"00")
+        return _reply(echo, b"01")
+
+    def _set_bit_rate(self, params: bytes) -> bytes:
+        if not params.isdigit():
+            return b"01"
+        rate = int(params)
+        if rate not in BIT_RATES:
+            return b"02"
+        if rate == self._bit_rate:
+            return b"03"
+        self._bit_rate = rate
+        return b"00"
+
+    def _set_speed(self, params: bytes) -> bytes:
+        if not params.isdigit():
+            return b"01"
+        code = int(params)
+        if code > MAX_SPEED_LEVEL and code != DEFAULT_SPEED_CODE:
+            return b"02"
+        level = 0 if code == DEFAULT_SPEED_CODE else code
+        if level == self._speed_level:
+            return b"03"
+        self._speed_level = level
+        return b"00"
+
+    def _set_sensitivity(self, params: bytes) -> bytes:
+        if params not in (b"0", b"1"):
+            return b"01"
+        high = params == b"1"
+        if high == self._high_sensitivity:
+            return b"02"
+        self._high_sensitivity = high
+        return b"00"
+
+    def _latest_scan(self, code: bytes, params: bytes, echo: bytes, now: float) -> bytes:
+        request = parse_scan_request(params, streaming=False)
+        if isinstance(request, bytes):
+            return _reply(echo, request)
+        if not self._laser_on:
+            return _reply(echo, b"10")
+        scan = self._scan_at(_latest_scan_index(now))
+        return _reply(echo, b"00", self._scan_body(scan, request, VALUE_CHARS[code]))
+
+    def _start_stream(self, code: bytes, params: bytes, echo: bytes, tag_suffix: bytes, now: float) -> bytes:
+        request = parse_scan_request(params, streaming=True)
+        if isinstance(request, bytes):
+            return _reply(echo, request)
+        self._laser_on = True
+        self._stream = _Stream(
+            command=code,
+            request=request,
+            tag_suffix=tag_suffix,
+            next_index=_first_scan_after(now),
+            remaining=request.count or None,
+        )
+        return _reply(echo, b"00")
+
+    # --- streaming ----------------------------------------------------------------
+
+    def _stream_message(self, stream: _Stream) -> bytes:
+        """The next scan message; advances (and maybe ends) the stream."""
+        scan = self._scan_at(stream.next_index)
+        remaining = 0 if stream.remaining is None else stream.remaining - 1
+        request = stream.request
+        echo = (
+            stream.command
+            + b"%04d%04d%02d%d%02d" % (request.start, request.end, request.cluster, request.interval, remaining)
+            + stream.tag_suffix
+        )
+        message = _reply(echo, b"99", self._scan_body(scan, request, VALUE_CHARS[stream.command]))
+        self._skip(stream, 1)
+        return message
+
+    def _skip(self, stream: _Stream, scans: int) -> None:
+        """Count `scans` as sent; after the last of N, the laser goes off."""
+        if scans == 0:
+            return
+        stream.next_index += scans * (stream.request.interval + 1)
+        if stream.remaining is not None:
+            stream.remaining -= scans
+            if stream.remaining <= 0:
+                self._stream, self._laser_on = None, False
+
+    def _scan_at(self, index: int) -> DeviceScan:
+        return self._scan_source(index / SCANS_PER_SECOND)
+
+    def _scan_body(self, scan: DeviceScan, request: ScanRequest, width: int) -> bytes:
+        values = cluster_minimum(np.asarray(scan.values)[request.start : request.end + 1], request.cluster)
+        return self._stamp(scan) + data_lines(encode_values(values, width))
+
+    # --- SCIP 1.1 -----------------------------------------------------------------
+
+    def _scip1_reply(self, line: Line, now: float) -> bytes:
+        if line.overlong:
+            return scip1.refusal(line.text)
+        if line.text == scip1.SWITCH_COMMAND:
+            self._protocol = "scip2"
+            return scip1.SWITCH_REPLY
+        return scip1.reply(
+            line.text, lambda: np.asarray(self._scan_at(_latest_scan_index(now)).values), self._serial
+        )
+
+
+def _reply(echo: bytes, status: bytes, body: bytes = b"") -> bytes:
+    """Echo, status with its sum, body lines, and the closing empty line."""
+    return echo + b"\n" + status + checksum(status) + b"\n" + body + b"\n"
+
+
+def _checked(text: bytes) -> bytes:
+    """One line: text, its sum, LF."""
+    return text + checksum(text) + b"\n"
+
+
+def _milliseconds(seconds: float) -> int:
+    """Whole milliseconds elapsed; the epsilon absorbs float noise (0.3 * 1000 = 299.99…)."""
+    return math.floor(seconds * 1000 + 1e-6)
+
+
+def _latest_scan_index(now: float) -> int:
+    """Index k of the last scan completed at `now` (k / 10 <= now)."""
+    return math.floor(now * SCANS_PER_SECOND + 1e-9)
+
+
+def _first_scan_after(now: float) -> int:
+    """Index of the first scan measured wholly after `now` (spec p.10: MD sends
+    data "taken after the command was received"): it starts at or after now."""
+    return math.ceil(now * SCANS_PER_SECOND - 1e-9) + 1

@@ -1,0 +1,105 @@
+"""SCIP character encodings, checksums and data blocks, vectorised with numpy.
+
+SCIP sends numbers as groups of 6 bits, most significant first, each + 0x30
+(spec C-42-03320B §6): 2 characters for GS/MS and SCIP 1.1 (max 4095),
+3 for GD/MD (max 262143), 4 for timestamps (24 bits). Every line the device
+sends after the status carries a one-character checksum: the low 6 bits of
+the byte sum, + 0x30. A scan's encoded values are cut into 64-character
+lines, each with its own checksum; values straddle lines.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+CHAR_OFFSET = 0x30
+BLOCK_CHARS = 64
+LF = 0x0A
+ERROR_CODE_LIMIT = 20  # URG-04LX values below this are error codes, not mm
+
+
+def checksum(data: bytes) -> bytes:
+    """The SCIP sum character of `data`."""
+    return bytes((((sum(data) & 0x3F) + CHAR_OFFSET),))
+
+
+def max_value(width: int) -> int:
+    """The largest value `width` characters can carry."""
+    return (1 << (6 * width)) - 1
+
+
+def encode_values(values: np.ndarray, width: int) -> bytes:
+    """Values as `width`-character groups, concatenated.
+
+    Values outside 0..max_value(width) saturate at the nearest bound: the
+    URG-04LX cannot report a distance beyond what the encoding can carry, and
+    wrapping would turn a far wall into a near one.
+    """
+    clipped = np.clip(np.asarray(values, dtype=np.int64), 0, max_value(width))
+    shifts = 6 * np.arange(width - 1, -1, -1, dtype=np.int64)
+    chars = ((clipped[:, None] >> shifts) & 0x3F) + CHAR_OFFSET
+    return chars.astype(np.uint8).tobytes()
+
+
+def decode_values(text: bytes, width: int) -> np.ndarray:
+    """The inverse of `encode_values`; `len(text)` must be a multiple of `width`."""
+    if len(text) % width:
+        raise ValueError(f"{len(text)} characters are not a whole number of {width}-character values")
+    groups = (np.frombuffer(text, dtype=np.uint8).astype(np.int64) - CHAR_OFFSET).reshape(-1, width)
+    shifts = 6 * np.arange(width - 1, -1, -1, dtype=np.int64)
+    return (groups << shifts).sum(axis=1)
+
+
+def data_lines(encoded: bytes, *, with_checksums: bool = True) -> bytes:
+    """Encoded values cut into 64-character lines, each + checksum (SCIP 2.0) + LF.
+
+    SCIP 1.1 sends the same lines without checksums.
+    """
+    chars = np.frombuffer(encoded, dtype=np.uint8)
+    full_count, rest = divmod(len(chars), BLOCK_CHARS)
+    suffix = 2 if with_checksums else 1
+    full = chars[: full_count * BLOCK_CHARS].reshape(full_count, BLOCK_CHARS)
+    out = np.empty((full_count, BLOCK_CHARS + suffix), dtype=np.uint8)
+    out[:, :BLOCK_CHARS] = full
+    if with_checksums:
+        out[:, BLOCK_CHARS] = (full.sum(axis=1, dtype=np.int64) & 0x3F) + CHAR_OFFSET
+    out[:, -1] = LF
+    lines = out.tobytes()
+    if rest:
+        tail = encoded[full_count * BLOCK_CHARS :]
+        lines += tail + (checksum(tail) if with_checksums else b"") + b"\n"
+    return lines
+
+
+def join_data_lines(lines: bytes) -> bytes:
+    """The inverse of `data_lines` (with checksums): the encoded characters.
+
+    Raises ValueError on a line whose checksum does not match.
+    """
+    if not lines.endswith(b"\n"):
+        raise ValueError("data lines must end with LF")
+    bodies = []
+    for line in lines[:-1].split(b"\n"):
+        if not line or checksum(line[:-1]) != line[-1:]:
+            raise ValueError(f"bad checksum on data line {line!r}")
+        bodies.append(line[:-1])
+    return b"".join(bodies)
+
+
+def cluster_minimum(values: np.ndarray, cluster: int) -> np.ndarray:
+    """Each run of `cluster` adjacent steps reduced to one value.
+
+    Spec p.10: the step with the minimum value, excluding errors (values
+    below 20). A run made only of error codes reports its smallest code.
+    The last run may be shorter. Error codes are lifted above every
+    distance, so one `minimum.reduceat` picks a distance whenever the run
+    has one.
+    """
+    values = np.asarray(values, dtype=np.int64)
+    if cluster <= 1:
+        return values
+    lift = np.int64(1) << 40
+    keyed = np.where(values < ERROR_CODE_LIMIT, values + lift, values)
+    smallest = np.minimum.reduceat(keyed, np.arange(0, len(values), cluster))
+    return np.where(smallest >= lift, smallest - lift, smallest)
+
