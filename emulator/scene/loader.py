@@ -125,22 +125,25 @@ def _locate(name_or_path: str | os.PathLike[str]) -> Path:
 
 def _read_toml(path: Path) -> dict[str, Any]:
     try:
-        with path.open("rb") as stream:
-            return tomllib.load(stream)
-    except tomllib.TOMLDecodeError as error:
-        raise SceneError(f"{path.name}: {_describe_toml_error(error)}") from error
+        text = path.read_bytes().decode("utf-8")
     except UnicodeDecodeError as error:
         raise SceneError(f"{path.name}: not UTF-8 text (byte {error.start})") from error
     except OSError as error:
         raise SceneError(f"{path.name}: cannot read: {error.strerror}") from error
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise SceneError(f"{path.name}: {_describe_toml_error(error, text)}") from error
 
 
-def _describe_toml_error(error: tomllib.TOMLDecodeError) -> str:
-    text = str(error)
-    located = _TOML_LOCATION.match(text)
+def _describe_toml_error(error: tomllib.TOMLDecodeError, text: str) -> str:
+    """tomllib's message led by its line number, which it gives only inside its text."""
+    message = str(error)
+    located = _TOML_LOCATION.match(message)
     if located:
         return f"line {located['line']}: {located['message']} (column {located['column']})"
-    return text.replace(" (at end of document)", "") + " at the end of the file"
+    last_line = max(1, len(text.splitlines()))
+    return f"line {last_line}: {message.replace(' (at end of document)', '')} (at the end of the file)"
 
 
 # --------------------------------------------------------------------------- typed access with places
@@ -445,7 +448,8 @@ def _plumes(tables: list[_Table]) -> tuple[Plume, ...]:
         start = table.number("start", 0.0)
         stop = table.number("stop", 1e9)
         if not start < stop:
-            raise table.place.key("stop").error(f"must be > start ({_show(table.raw('start', start))}), got {_show(table.raw('stop', stop))}")
+            start_text, stop_text = _show(table.raw("start", start)), _show(table.raw("stop", stop))
+            raise table.place.key("stop").error(f"must be > start ({start_text}), got {stop_text}")
         plumes.append(
             Plume(
                 name=name,
@@ -509,7 +513,7 @@ def _lms_options(table: _Table) -> dict[str, Any]:
     angle_deg = int(table.number_choice("angle_deg", 180, LMS_ANGLES_DEG))
     resolution_deg = table.number_choice("resolution_deg", 0.5, LMS_RESOLUTIONS_DEG)
     if angle_deg == 180 and resolution_deg == 0.25:
-        raise table.place.key("resolution_deg").error("0.25 needs angle_deg = 100 (the LMS200 has no 180° scan at 0.25°)")
+        raise table.place.key("resolution_deg").error("0.25 needs angle_deg = 100 (no 180° scan at 0.25°)")
     baud = table.integer("baud", 9600)
     if baud not in LMS_BAUDS:
         raise table.place.key("baud").error(f"must be one of {_choices(LMS_BAUDS)}, got {baud}")
@@ -535,7 +539,7 @@ def _sensors(tables: list[_Table]) -> tuple[SensorSpec, ...]:
         other_model = next(other for other in SENSOR_MODELS if other != model)
         foreign = next((key for key in OPTION_KEYS[other_model] if key in table), None)
         if foreign:
-            raise table.place.key(foreign).error(f"is a {other_model} option, but this sensor's model is {_show(model)}")
+            raise table.place.key(foreign).error(f"is an option of {other_model}, not of {model}")
         options = _urg_options(table) if model == "urg-04lx" else _lms_options(table)
         endpoints = _endpoints(table, owners, name)
         sensors.append(SensorSpec(name, model, table.pose(), endpoints, MappingProxyType(options)))
