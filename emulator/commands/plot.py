@@ -1,15 +1,44 @@
-"""`lrf-emulator plot` (CLI.md). PLACEHOLDER: replaced by the module's owner."""
+"""`lrf-emulator plot SCENE --sensor NAME --start T0 --end T1 --out FILE.png` (CLI.md).
+
+A waterfall of the sensor's scans (time down, beam angle across, darker =
+shorter, red = error code) like the paper's Fig. 3 and 10, with the smoke level
+over time beside it like Fig. 5 (mean density along the beams and the assumed
+camera saturation for scenes with smoke regions; the share of beams meeting a
+plume for scenes with plumes). Needs matplotlib (`pip install '.[plot]'`).
+"""
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from emulator.errors import UserError
+from emulator.plotting import draw_waterfall, pyplot, sensor_series
+from emulator.scene import load_scene
+
+MAX_PIXELS = 8000
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    pass
+    parser.add_argument("scene", metavar="SCENE", help="bundled scene name or path to a .toml file")
+    parser.add_argument("--sensor", required=True, metavar="NAME", help="the scene's sensor to plot")
+    parser.add_argument("--start", type=float, default=0.0, metavar="T0", help="first simulated time (s)")
+    parser.add_argument("--end", type=float, required=True, metavar="T1", help="last simulated time (s)")
+    parser.add_argument("--out", required=True, type=Path, metavar="FILE.png", help="PNG file to write")
+    parser.add_argument("--width", type=int, default=1200, metavar="PX", help="image width in pixels")
+    parser.add_argument("--height", type=int, default=800, metavar="PX", help="image height in pixels")
 
 
 def run(args: argparse.Namespace) -> int:
-    raise UserError("not implemented yet")
+    for name, pixels in (("--width", args.width), ("--height", args.height)):
+        if not 200 <= pixels <= MAX_PIXELS:
+            raise UserError(f"{name} must be between 200 and {MAX_PIXELS} pixels, got {pixels}")
+    pyplot()  # fail before the computation when matplotlib is missing
+    scene = load_scene(args.scene)
+    series = sensor_series(scene, args.sensor, args.start, args.end)
+    try:
+        draw_waterfall(series, args.out, width_px=args.width, height_px=args.height)
+    except OSError as error:
+        raise UserError(f"cannot write {args.out}: {error.strerror or error}") from None
+    print(f"wrote {args.out} ({len(series.times_s)} scans of {series.sensor})")
+    return 0

@@ -1,0 +1,190 @@
+"""Scans over time and the smoke along the beams, and the waterfall figure (paper Fig. 3, 5, 10).
+
+`sensor_series` computes what a plot shows: every scan of a sensor between two
+times, plus the smoke its beams crossed at each scan. `draw_waterfall` draws a
+waterfall (time down, angle across as seen from behind the sensor, darker =
+shorter, red = error code) with the smoke level over time beside it.
+
+Camera saturation is shown for scenes with smoke regions, from the mean
+density along the beams by `s = s0·exp(−c·density)` (SMOKE_MODEL.md §3). That
+curve is an assumption fitted to the paper's single published point
+(density 0.0028 ↔ saturation 0.14); every figure says so.
+
+matplotlib is an optional extra: `pip install '.[plot]'`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from emulator.commands.record import scan_series, scan_times
+from emulator.errors import UserError
+from emulator.optics import World
+from emulator.scene import Scene
+from emulator.sensors import ranges_m
+
+SATURATION_CLEAR = 0.8
+SATURATION_PER_DENSITY = math.log(0.8 / 0.14) / 0.0028  # ≈ 622 per density unit
+SATURATION_NOTE = "camera saturation s = 0.8·exp(−622·density): an assumption fitted to 0.0028 ↔ 0.14"
+
+CAST_RANGE_M = {"urg-04lx": 5.6, "lms200": 80.0}
+# Codes that mean "nothing within range", shaded as the far end, not as errors.
+NO_RETURN_CODES = {"urg-04lx": (0,), "lms200": (8183, 8191)}
+URG_VALID_STEPS = slice(44, 726)  # the URG-04LX's measurable area, steps 44..725
+
+ERROR_RGB = (0.86, 0.10, 0.10)
+NO_RETURN_RGB = (0.86, 0.92, 1.0)
+
+
+def saturation(density: np.ndarray | float) -> np.ndarray:
+    """Assumed camera saturation of the reference target seen through `density` (SMOKE_MODEL.md §3)."""
+    return SATURATION_CLEAR * np.exp(-SATURATION_PER_DENSITY * np.asarray(density, dtype=float))
+
+
+@dataclass(frozen=True)
+class SensorSeries:
+    """A sensor's scans over time (n scans × m beams) and the smoke its beams crossed.
+
+    `ranges_m` is NaN for every code; `no_return` marks codes meaning nothing in
+    range; `errors` the other codes. `mean_density` is ∫density ds / beam length
+    averaged over the beams (d); `plume_share` the fraction of beams whose
+    first obstacle is a plume particle.
+    """
+
+    sensor: str
+    model: str
+    unit: str
+    times_s: np.ndarray
+    angles_rad: np.ndarray
+    values: np.ndarray
+    ranges_m: np.ndarray
+    no_return: np.ndarray
+    errors: np.ndarray
+    mean_density: np.ndarray
+    plume_share: np.ndarray
+    has_regions: bool
+    has_plumes: bool
+
+    @property
+    def saturation(self) -> np.ndarray:
+        return saturation(self.mean_density)
+
+    @property
+    def max_range_m(self) -> float:
+        if self.model == "urg-04lx":
+            return 5.6
+        return 8.183 if self.unit == "mm" else 81.83
+
+
+def _beam_rays(scene: Scene, sensor_name: str, angles_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World origins and directions of the beams at `angles_rad` (sensor frame, in its xy-plane)."""
+    pose = scene.sensor(sensor_name).pose
+    local = np.stack([np.cos(angles_rad), np.sin(angles_rad), np.zeros_like(angles_rad)], axis=1)
+    directions = local @ pose.rotation_matrix().T
+    origins = np.broadcast_to(np.asarray(pose.position, dtype=float), directions.shape)
+    return origins, directions
+
+
+def sensor_series(scene: Scene, sensor_name: str, start_s: float, end_s: float) -> SensorSeries:
+    """Every scan of the sensor in [start_s, end_s] and the smoke along its beams at each."""
+    try:
+        spec = scene.sensor(sensor_name)
+    except KeyError as error:
+        raise UserError(error.args[0]) from None
+    times = scan_times(spec, start_s, end_s)
+    if len(times) < 2:
+        raise UserError(f"--start {start_s} to --end {end_s} holds fewer than two scans of {sensor_name}")
+    world = World(scene)
+    scans = list(scan_series(scene, sensor_name, times, world=world))
+    columns = URG_VALID_STEPS if spec.model == "urg-04lx" else slice(None)
+    angles = np.asarray(scans[0].angles_rad)[columns]
+    values = np.vstack([np.asarray(scan.values)[columns] for scan in scans]).astype(np.int64)
+    ranges = np.vstack([ranges_m(scan)[columns] for scan in scans])
+    is_code = np.isnan(ranges)
+    no_return = np.isin(values, NO_RETURN_CODES[spec.model]) & is_code
+    origins, directions = _beam_rays(scene, sensor_name, angles)
+    mean_density = np.zeros(len(times))
+    plume_share = np.zeros(len(times))
+    for i, time_s in enumerate(times):
+        hits = world.cast(origins, directions, CAST_RANGE_M[spec.model], float(time_s))
+        mean_density[i] = float(np.mean(hits.region_optical_path / hits.beam_end_m))
+        plume_share[i] = float(np.mean(np.isfinite(hits.plume_hit_range_m)))
+    return SensorSeries(
+        sensor=spec.name, model=spec.model, unit=scans[0].unit, times_s=times, angles_rad=angles,
+        values=values, ranges_m=ranges, no_return=no_return, errors=is_code & ~no_return,
+        mean_density=mean_density, plume_share=plume_share,
+        has_regions=bool(scene.regions), has_plumes=bool(scene.plumes),
+    )
+
+
+def pyplot() -> Any:
+    """matplotlib.pyplot on the Agg backend, or a UserError saying how to install it."""
+    try:
+        import matplotlib
+    except ImportError:
+        raise UserError("plotting needs matplotlib: pip install 'lrf-emulator[plot]'") from None
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def waterfall_rgb(series: SensorSeries) -> np.ndarray:
+    """(n, m, 3) image: grey by range (darker = shorter), red for errors, pale for no return."""
+    shade = 0.08 + 0.87 * np.clip(np.nan_to_num(series.ranges_m, nan=0.0) / series.max_range_m, 0.0, 1.0)
+    image = np.repeat(shade[:, :, None], 3, axis=2)
+    image[series.no_return] = NO_RETURN_RGB
+    image[series.errors] = ERROR_RGB
+    return image
+
+
+def draw_waterfall(series: SensorSeries, out: Path, *, width_px: int = 1200, height_px: int = 800, title: str = "") -> None:
+    """Write the waterfall PNG of exactly width_px × height_px pixels."""
+    plt = pyplot()
+    from matplotlib.patches import Patch
+
+    dpi = 100
+    side = 2 * series.has_regions + series.has_plumes
+    figure = plt.figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi)
+    grid = figure.add_gridspec(1, 1 + side, width_ratios=[3] + [1] * side, wspace=0.08)
+    axes = figure.add_subplot(grid[0, 0])
+    degrees = np.degrees(series.angles_rad)
+    axes.imshow(
+        waterfall_rgb(series), aspect="auto", interpolation="nearest",
+        extent=(degrees[0], degrees[-1], series.times_s[-1], series.times_s[0]),
+    )
+    axes.set_xlim(degrees.max(), degrees.min())  # left of the plot = the sensor's left
+    axes.set_xlabel("beam angle (°, sensor frame; + = left)")
+    axes.set_ylabel("time (s)")
+    axes.set_title(title or f"{series.sensor} ({series.model}): darker = shorter range")
+    axes.legend(
+        handles=[Patch(color=ERROR_RGB, label="error code"), Patch(color=NO_RETURN_RGB, label="no return / beyond max")],
+        loc="lower left", fontsize="small", framealpha=0.9,
+    )
+    column = 1
+    if series.has_regions:
+        density_axes = figure.add_subplot(grid[0, column], sharey=axes)
+        density_axes.plot(series.mean_density * 1000.0, series.times_s, color="tab:blue")
+        density_axes.set_xlabel("mean density along beams (10⁻³ d)")
+        density_axes.tick_params(labelleft=False)
+        saturation_axes = figure.add_subplot(grid[0, column + 1], sharey=axes)
+        saturation_axes.plot(series.saturation, series.times_s, color="tab:orange")
+        saturation_axes.axvline(0.14, color="grey", linestyle="--", linewidth=0.8)
+        saturation_axes.set_xlim(0.0, SATURATION_CLEAR + 0.05)
+        saturation_axes.set_xlabel("camera saturation\n(assumed curve)")
+        saturation_axes.tick_params(labelleft=False)
+        column += 2
+    if series.has_plumes:
+        plume_axes = figure.add_subplot(grid[0, column], sharey=axes)
+        plume_axes.plot(series.plume_share * 100.0, series.times_s, color="tab:green")
+        plume_axes.set_xlabel("beams meeting a plume (%)")
+        plume_axes.tick_params(labelleft=False)
+    if series.has_regions:
+        figure.text(0.01, 0.005, SATURATION_NOTE, fontsize="x-small", color="dimgrey")
+    figure.savefig(out, dpi=dpi)
+    plt.close(figure)
