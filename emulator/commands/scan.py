@@ -1,15 +1,67 @@
-"""`lrf-emulator scan` (CLI.md). PLACEHOLDER: replaced by the module's owner."""
+"""`lrf-emulator scan SCENE --sensor NAME [--time T] [--seed N]`: one scan as JSON (CLI.md).
+
+The URG-04LX gives all 769 steps (0..768; steps outside 44..725 carry the
+sensor's out-of-area value); the LMS200 the scan its scene options select
+(angle_deg, resolution_deg, units), e.g. 100° → device angles 40°..140°.
+"""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import json
+import sys
 
-from emulator.errors import UserError
+import numpy as np
+
+from emulator.scene import load_scene
+from emulator.sensors import LmsSensor, Scan, create_sensor, ranges_m
+
+
+ANGLE_DECIMALS = 9  # the devices' angles are exact in far fewer digits; drop float noise
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    pass
+    parser.add_argument("scene", metavar="SCENE", help="bundled scene name or path to a .toml file")
+    parser.add_argument("--sensor", required=True, metavar="NAME", help="the scene's sensor to scan with")
+    parser.add_argument("--time", type=float, default=0.0, metavar="T", help="simulated time in seconds (default 0)")
+    parser.add_argument("--seed", type=int, default=None, metavar="N", help="override the scene's seed")
+
+
+def lms_scan_window(options: dict) -> dict:
+    """start_deg, step_deg, count and unit of the scan an LMS200 with these options sends."""
+    angle = float(options.get("angle_deg", 180))
+    step = float(options.get("resolution_deg", 0.5))
+    return {
+        "start_deg": (180.0 - angle) / 2.0,
+        "step_deg": step,
+        "count": int(round(angle / step)) + 1,
+        "unit": options.get("units", "mm"),
+    }
+
+
+def scan_json(scan: Scan) -> dict:
+    ranges = ranges_m(scan)
+    return {
+        "sensor": scan.sensor,
+        "model": scan.model,
+        "time_s": scan.time_s,
+        "unit": scan.unit,
+        "angles_deg": np.round(np.degrees(scan.angles_rad), ANGLE_DECIMALS).tolist(),
+        "values": [int(v) for v in scan.values],
+        "ranges_m": [None if np.isnan(r) else float(r) for r in ranges],
+    }
 
 
 def run(args: argparse.Namespace) -> int:
-    raise UserError("not implemented yet")
+    scene = load_scene(args.scene)
+    if args.seed is not None:
+        scene = dataclasses.replace(scene, seed=args.seed)
+    sensor = create_sensor(scene, args.sensor)
+    if isinstance(sensor, LmsSensor):
+        scan = sensor.scan(args.time, **lms_scan_window(dict(sensor.spec.options)))
+    else:
+        scan = sensor.scan(args.time)
+    json.dump(scan_json(scan), sys.stdout)
+    sys.stdout.write("\n")
+    return 0

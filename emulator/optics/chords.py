@@ -30,29 +30,31 @@ def _empty_where(entry: np.ndarray, exit_: np.ndarray) -> tuple[np.ndarray, np.n
 def _slab(
     origins: np.ndarray, directions: np.ndarray, lower: np.ndarray, upper: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Slab test of rays (N, A) against boxes (M, A) over A axes → near, far (N, M).
+    """Slab test of rays against axis-aligned boxes → near, far.
 
-    The ray is inside box m for near < t < far (empty when far < near). A
-    direction component of exactly 0 keeps the ray inside that axis's slab for
-    all t when its origin lies within it, and outside otherwise.
+    Arguments broadcast against each other; their last axis is the A axes
+    tested. The ray is inside the box for near < t < far (empty when
+    far < near). A direction component of exactly 0 keeps the ray inside
+    that axis's slab for all t when its origin lies within it, and outside
+    otherwise.
     """
-    near = np.full((len(origins), len(lower)), -np.inf)
-    far = np.full((len(origins), len(lower)), np.inf)
-    for axis in range(origins.shape[1]):
-        o = origins[:, axis, None]
-        d = directions[:, axis, None]
+    shape = np.broadcast_shapes(origins.shape[:-1], directions.shape[:-1], lower.shape[:-1], upper.shape[:-1])
+    near = np.full(shape, -np.inf)
+    far = np.full(shape, np.inf)
+    for axis in range(origins.shape[-1]):
+        o, d = origins[..., axis], directions[..., axis]
+        low, high = lower[..., axis], upper[..., axis]
         with np.errstate(divide="ignore", invalid="ignore"):
             inverse = 1.0 / d
-            t_lower = (lower[None, :, axis] - o) * inverse
-            t_upper = (upper[None, :, axis] - o) * inverse
+            t_lower = (low - o) * inverse
+            t_upper = (high - o) * inverse
         axis_near = np.minimum(t_lower, t_upper)
         axis_far = np.maximum(t_lower, t_upper)
-        parallel = d[:, 0] == 0.0
+        parallel = d == 0.0
         if parallel.any():
-            o_parallel = o[parallel]
-            inside = (lower[None, :, axis] <= o_parallel) & (o_parallel <= upper[None, :, axis])
-            axis_near[parallel] = np.where(inside, -np.inf, np.inf)
-            axis_far[parallel] = np.where(inside, np.inf, -np.inf)
+            inside = (low <= o) & (o <= high)
+            axis_near = np.where(parallel, np.where(inside, -np.inf, np.inf), axis_near)
+            axis_far = np.where(parallel, np.where(inside, np.inf, -np.inf), axis_far)
         np.maximum(near, axis_near, out=near)
         np.minimum(far, axis_far, out=far)
     return near, far
@@ -61,7 +63,14 @@ def _slab(
 def slab_intervals(
     origins: np.ndarray, directions: np.ndarray, lower: np.ndarray, upper: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Entry and exit of rays (N, 3) through axis-aligned boxes [lower, upper] (M, 3) → (N, M)."""
+    """Entry and exit of every ray (N, 3) through every axis-aligned box [lower, upper] (M, 3) → (N, M)."""
+    return _empty_where(*_slab(origins[:, None, :], directions[:, None, :], lower[None], upper[None]))
+
+
+def paired_slab_intervals(
+    origins: np.ndarray, directions: np.ndarray, lower: np.ndarray, upper: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Entry and exit of ray k (K, 3) through box k (K, 3) → (K,)."""
     return _empty_where(*_slab(origins, directions, lower, upper))
 
 
@@ -90,10 +99,10 @@ def cylinder_intervals(shape: Cylinder, origins: np.ndarray, directions: np.ndar
         root = np.sqrt(b * b - a * c)
         side_near = np.where(along_axis, np.where(c <= 0, -np.inf, np.inf), (-b - root) / a)
         side_far = np.where(along_axis, np.where(c <= 0, np.inf, -np.inf), (-b + root) / a)
-    half_height = np.array([[0.5 * shape.height]])
+    half_height = np.array([0.5 * shape.height])
     cap_near, cap_far = _slab(origins[:, 2:], directions[:, 2:], -half_height, half_height)
-    near = np.maximum(side_near, cap_near[:, 0])
-    far = np.minimum(side_far, cap_far[:, 0])
+    near = np.maximum(side_near, cap_near)
+    far = np.minimum(side_far, cap_far)
     return _empty_where(near[:, None], far[:, None])
 
 

@@ -16,14 +16,11 @@ from embreex.mesh_construction import TriangleMesh
 from embreex.rtcore_scene import EmbreeScene
 
 from emulator.errors import SceneError
-from emulator.optics.chords import NO_HIT, shape_intervals, slab_intervals
+from emulator.optics.chords import NO_HIT, paired_slab_intervals, shape_intervals
 from emulator.optics.hits import BeamHits, RegionCrossing
 from emulator.scene.geometry import shape_mesh, world_mesh, world_to_local
 from emulator.scene.model import MeshFile, Scene
 from emulator.scene.plumes import Particles, particles_at
-
-_PAIRS_PER_CHUNK = 1_000_000  # beams × particles per slab-test batch
-
 
 class World:
     """A scene ready for casting: build once per scene, cast at any time."""
@@ -141,28 +138,57 @@ class World:
     def _first_particle(
         self, origins: np.ndarray, directions: np.ndarray, beam_end: np.ndarray, time_s: float
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Entry distance and density of the first particle box before each beam's end."""
+        """Entry distance and density of the first particle box before each beam's end.
+
+        Particles outside the beams' bounding box are dropped first; a
+        bounding-sphere test over the remaining beams × particles picks the
+        candidate pairs; the exact slab test runs on those only.
+        """
         first_range = np.full(len(origins), np.inf)
         first_density = np.zeros(len(origins))
         particles = self.particles_at(time_s)
-        if len(particles) == 0:
+        if len(particles) == 0 or len(origins) == 0:
             return first_range, first_density
-        lower = particles.centers - particles.half_sizes[:, None]
-        upper = particles.centers + particles.half_sizes[:, None]
+        centers, half_sizes, density = self._near_beams(particles, origins, directions, beam_end)
+        radius = half_sizes * np.sqrt(3.0)
+        origin_along = np.einsum("ij,ij->i", origins, directions)
+        along = directions @ centers.T - origin_along[:, None]
+        distance_squared = (
+            np.einsum("ij,ij->i", centers, centers)[None, :]
+            - 2.0 * (origins @ centers.T)
+            + np.einsum("ij,ij->i", origins, origins)[:, None]
+        )
+        candidate = (
+            (distance_squared - along * along <= (radius * radius)[None, :] + 1e-9)
+            & (along >= -radius[None, :])
+            & (along <= beam_end[:, None] + radius[None, :])
+        )
+        beam, particle = np.nonzero(candidate)
+        if len(beam) == 0:
+            return first_range, first_density
+        half = half_sizes[particle, None]
+        entry, exit_ = paired_slab_intervals(
+            origins[beam], directions[beam], centers[particle] - half, centers[particle] + half
+        )
+        entry = np.maximum(entry, 0.0)
+        met = (exit_ >= entry) & (entry < beam_end[beam])
+        beam, particle, entry = beam[met], particle[met], entry[met]
+        order = np.lexsort((entry, beam))
+        beam, particle, entry = beam[order], particle[order], entry[order]
+        first = np.ones(len(beam), dtype=bool)
+        first[1:] = beam[1:] != beam[:-1]
+        first_range[beam[first]] = entry[first]
+        first_density[beam[first]] = density[particle[first]]
+        return first_range, first_density
+
+    @staticmethod
+    def _near_beams(
+        particles: Particles, origins: np.ndarray, directions: np.ndarray, beam_end: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Centres, half sizes and densities of the particles whose box touches the beams' bounding box."""
         ends = origins + directions * beam_end[:, None]
         reach_lower = np.minimum(origins.min(axis=0), ends.min(axis=0))
         reach_upper = np.maximum(origins.max(axis=0), ends.max(axis=0))
-        near_beams = np.all((upper >= reach_lower) & (lower <= reach_upper), axis=1)
-        lower, upper, density = lower[near_beams], upper[near_beams], particles.density[near_beams]
-        step = max(1, _PAIRS_PER_CHUNK // len(origins))
-        for start in range(0, len(lower), step):
-            near, far = slab_intervals(origins, directions, lower[start : start + step], upper[start : start + step])
-            entry = np.maximum(near, 0.0)
-            met = (far >= entry) & (entry < beam_end[:, None])
-            entry = np.where(met, entry, np.inf)
-            nearest = entry.argmin(axis=1)
-            nearest_range = entry[np.arange(len(origins)), nearest]
-            closer = nearest_range < first_range
-            first_range = np.where(closer, nearest_range, first_range)
-            first_density = np.where(closer, density[start : start + step][nearest], first_density)
-        return first_range, first_density
+        half = particles.half_sizes[:, None]
+        near = np.all((particles.centers + half >= reach_lower) & (particles.centers - half <= reach_upper), axis=1)
+        return particles.centers[near], particles.half_sizes[near], particles.density[near]
