@@ -17,6 +17,11 @@ from emulator.transport.link import READ_SIZE, Link
 from emulator.transport.outbox import DEFAULT_LIMIT_BYTES
 from protocols.device import Output
 
+# The kernel's send buffer would otherwise autotune to megabytes of stale scans
+# ahead of a slow client; keep it near a device's own buffering so the outbox
+# drops old scans and the client sees fresh ones.
+SEND_BUFFER_BYTES = 16 * 1024
+
 
 class TcpEndpoint:
     """Serves one session on a listening TCP socket."""
@@ -94,6 +99,7 @@ class TcpEndpoint:
         client.setblocking(False)
         client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         client.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
+        client.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER_BYTES)
         self.clients_served += 1
         self._client = client
         self._link = Link(
