@@ -73,6 +73,7 @@ class _Stream:
 
     command: bytes  # b"MD" or b"MS"
     request: ScanRequest
+    echo_prefix: bytes  # the command and parameters as received, up to the count
     tag_suffix: bytes  # b"" or b";" + tag, echoed on every scan
     next_index: int  # scan index of the next message
     remaining: int | None  # None while unlimited
@@ -296,6 +297,7 @@ class UrgDevice:
         self._stream = _Stream(
             command=code,
             request=request,
+            echo_prefix=code + params[:-2],
             tag_suffix=tag_suffix,
             next_index=_first_scan_after(now),
             remaining=request.count or None,
@@ -308,13 +310,8 @@ class UrgDevice:
         """The next scan message; advances (and maybe ends) the stream."""
         scan = self._scan_at(stream.next_index)
         remaining = 0 if stream.remaining is None else stream.remaining - 1
-        request = stream.request
-        echo = (
-            stream.command
-            + b"%04d%04d%02d%d%02d" % (request.start, request.end, request.cluster, request.interval, remaining)
-            + stream.tag_suffix
-        )
-        message = _reply(echo, b"99", self._scan_body(scan, request, VALUE_CHARS[stream.command]))
+        echo = stream.echo_prefix + b"%02d" % remaining + stream.tag_suffix
+        message = _reply(echo, b"99", self._scan_body(scan, stream.request, VALUE_CHARS[stream.command]))
         self._skip(stream, 1)
         return message
 
