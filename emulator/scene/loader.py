@@ -326,7 +326,7 @@ def _build_scene(raw: dict[str, Any], path: Path) -> Scene:
     root = _as_table(raw, _Place(path.name), TOP_KEYS)
     header = root.table("scene", SCENE_KEYS) if "scene" in root else _Table({}, root.place.key("scene"))
     description = header.string("description", "")
-    if "\n" in description:
+    if len(description.splitlines()) > 1:
         raise header.place.key("description").error("must be one line")
     materials = _materials(root.tables("materials", MATERIAL_KEYS))
     smoke = root.table("smoke", SMOKE_KEYS) if "smoke" in root else _Table({}, root.place.key("smoke"))
