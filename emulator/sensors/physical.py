@@ -1,0 +1,83 @@
+"""Preset `physical`: one echo-power mechanism behind every smoke behaviour (SMOKE_MODEL.md §4).
+
+Extinction σ = density_to_extinction × density attenuates each echo twice
+(Beer–Lambert); a surface's echo ∝ reflectivity · cos^n / R² · T must reach a
+threshold derived from the paper (white paper at 2.5 m fails at exactly
+0.007 d·m); smoke backscatters and competes with the surface echo; density
+fluctuations and datasheet noise make it flicker. The two receivers differ:
+
+- URG-04LX (AMCW phase): all returns blend into one phase; the range is
+  their power-weighted mean (pulled toward the sensor by smoke). Codes:
+  1 too weak (0 when nothing solid is in reach and the smoke alone would not
+  extinguish the reference target), 8 when the blend decoheres (two-wave
+  intensity mismatch), 19 below 20 mm.
+- LMS200 (pulsed, first echo): the first distance where the integrated echo
+  energy reaches its threshold; a dense plume front triggers it (smoke seen as
+  an obstacle); a smeared rise at a plume edge gives 8187 (signal-to-noise
+  too small); no echo 8191; beyond the unit's maximum 8183.
+
+See docs/physical-model.md for every parameter and the validation figures.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from emulator.errors import UserError
+from emulator.optics import BeamHits
+from emulator.scene.model import Scene
+from emulator.sensors import lms200, urg04lx
+from emulator.sensors.physical_beams import beam_physics
+from emulator.sensors.physical_echo import lms_first_echo, log_threshold, urg_decision
+from emulator.sensors.physical_noise import lms_range_error_m, scan_rng, urg_range_noise_m
+from emulator.sensors.physical_params import DEFAULT_PARAMS, PhysicalParams
+from emulator.sensors.response import PRESET_MODULES, Beams
+
+URG_INCOHERENT = 8  # SCIP: intensity of the two waves do not match
+LMS_SIGNAL_TO_NOISE = 8187  # LMS2xx: signal-to-noise ratio too small
+
+
+def apply_model_override(scene: Scene, model: str | None) -> Scene:
+    """`scene` with its smoke/sensor model replaced (a CLI `--model`); None keeps it."""
+    if model is None:
+        return scene
+    if model not in PRESET_MODULES:
+        raise UserError(f"unknown smoke model {model!r} (known: {', '.join(PRESET_MODULES)})")
+    return dataclasses.replace(scene, model=model)
+
+
+def urg_values(hits: BeamHits, beams: Beams, params: PhysicalParams = DEFAULT_PARAMS) -> np.ndarray:
+    receiver = params.urg
+    physics = beam_physics(hits, beams, receiver, params)
+    surfaces, smoke = physics.surfaces, physics.smoke
+    threshold = log_threshold(receiver, params, beams.scene.density_to_extinction)
+    detected, coherent, range_m = urg_decision(
+        surfaces.log_echo, surfaces.amp, surfaces.range_m, smoke.amp, smoke.mid_m, threshold, receiver
+    )
+    if params.noise:
+        range_m = range_m + urg_range_noise_m(scan_rng(beams.scene.seed, beams.sensor.name, beams.time_s), range_m)
+    millimetres = np.rint(np.where(detected, range_m, 0.0) * 1000.0).astype(np.int64)
+    values = np.where(millimetres < urg04lx.MIN_VALUE_MM, urg04lx.NON_MEASURABLE, millimetres)
+    values = np.where(coherent, values, URG_INCOHERENT)
+    has_surface = surfaces.present.any(axis=1)
+    smoke_extinguishes = physics.optical_path_to_end > params.penetration_power
+    weak = np.where(has_surface | smoke_extinguishes, urg04lx.LOW_INTENSITY, urg04lx.NO_ECHO)
+    return np.where(detected, values, weak)
+
+
+def lms_values(hits: BeamHits, beams: Beams, unit: str, params: PhysicalParams = DEFAULT_PARAMS) -> np.ndarray:
+    receiver = params.lms
+    physics = beam_physics(hits, beams, receiver, params)
+    surfaces, smoke = physics.surfaces, physics.smoke
+    threshold = log_threshold(receiver, params, beams.scene.density_to_extinction)
+    echo_m, _, clean = lms_first_echo(surfaces.amp, surfaces.range_m, smoke.amp, smoke.edges_m, threshold, receiver)
+    seen = np.isfinite(echo_m)
+    if params.noise:
+        rng = scan_rng(beams.scene.seed, beams.sensor.name, beams.time_s)
+        echo_m = echo_m + lms_range_error_m(rng, beams.scene.seed, beams.sensor.name, np.degrees(beams.angles_rad) + 90.0)
+    counts = np.rint(np.where(seen, np.maximum(echo_m, 0.0), 0.0) * lms200.UNITS_PER_M[unit]).astype(np.int64)
+    values = np.where(counts >= lms200.ABOVE_MAXIMUM, lms200.ABOVE_MAXIMUM, counts)
+    values = np.where(clean, values, LMS_SIGNAL_TO_NOISE)
+    return np.where(seen, values, lms200.NO_ECHO)

@@ -1,0 +1,197 @@
+"""What the `physical` model knows about each beam before a receiver decides.
+
+From the optics' `BeamHits` and the beams' geometry: the smoke along each
+beam as cumulative optical paths on a per-beam grid of range bins (smoke
+regions exactly from their entry/exit distances, plume puffs analytically),
+the fluctuation factor scaling each beam's smoke, and the surfaces the beam's
+footprint meets (sub-rays at depth edges), each with its optical path.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from emulator.optics import BeamHits
+from emulator.optics.puffs import BeamPuffCrossings, Puffs, cross_beams
+from emulator.scene.material_optics import optics_for, patch_values
+from emulator.sensors.beam_geometry import scan_plane_rays
+from emulator.sensors.physical_echo import log_target_echo, smoke_bin_echo
+from emulator.sensors.physical_noise import fluctuation_factor
+from emulator.sensors.physical_params import PhysicalParams, ReceiverOptics
+from emulator.sensors.response import Beams
+
+
+@dataclass(frozen=True)
+class Surfaces:
+    """The surfaces in each beam's footprint, (N, S): S sub-rays, unused ones with amp 0.
+
+    `log_echo` is ln of the footprint's summed echo (N,), exact for a beam
+    with one surface; `amp` each sub-ray's share of the echo power;
+    `range_m` the range each would report (material range stretch included).
+    """
+
+    log_echo: np.ndarray
+    amp: np.ndarray
+    range_m: np.ndarray
+    present: np.ndarray
+
+
+@dataclass(frozen=True)
+class SmokeEchoes:
+    """Smoke backscatter per range bin: power (N, M), bin centres (N, M), bin edges (N, M+1)."""
+
+    amp: np.ndarray
+    mid_m: np.ndarray
+    edges_m: np.ndarray
+
+
+@dataclass(frozen=True)
+class BeamPhysics:
+    surfaces: Surfaces
+    smoke: SmokeEchoes
+    optical_path_to_end: np.ndarray  # fluctuation included
+
+
+def beam_physics(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, params: PhysicalParams) -> BeamPhysics:
+    scene = beams.scene
+    extinction = scene.density_to_extinction
+    beam_end = hits.beam_end_m
+    crossings = cross_beams(Puffs.from_particles(beams.world.particles_at(beams.time_s)), beams.origins, beams.directions, beam_end)
+    column = hits.region_optical_path + crossings.optical_path_to(beam_end)
+    smoke_start, smoke_end = _smoke_extent(hits, crossings, beam_end)
+    smoke_distance = np.where(np.isfinite(smoke_start), 0.5 * (smoke_start + np.minimum(smoke_end, beam_end)), 1.0)
+    factor = fluctuation_factor(scene.seed, beams.sensor.name, beams.angles_rad, beams.time_s, column, smoke_distance, params)
+    surfaces = _surfaces(hits, beams, crossings, factor, receiver, params)
+    far_end = np.where(surfaces.present.any(axis=1), np.where(surfaces.present, surfaces.range_m, 0.0).max(axis=1), beam_end)
+    smoke = _smoke_echoes(hits, crossings, factor, smoke_start, np.minimum(smoke_end, far_end), extinction, receiver, params)
+    return BeamPhysics(surfaces, smoke, factor * column)
+
+
+def _smoke_extent(hits: BeamHits, crossings: BeamPuffCrossings, beam_end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    start, end = crossings.extent_m(len(hits))
+    for region in hits.regions:
+        if region.density <= 0:
+            continue
+        entered = np.isfinite(region.entry_m) & (region.entry_m < beam_end[:, None])
+        start = np.minimum(start, np.where(entered, region.entry_m, np.inf).min(axis=1))
+        end = np.maximum(end, np.where(entered, region.exit_m, -np.inf).max(axis=1))
+    return start, np.minimum(end, beam_end)
+
+
+def _region_path_to(hits: BeamHits, rows: np.ndarray, limits: np.ndarray) -> np.ndarray:
+    """Region optical path from the origin to `limits` (len(rows), S) for beams `rows`."""
+    total = np.zeros(limits.shape)
+    for region in hits.regions:
+        if region.density <= 0:
+            continue
+        entry, exit_ = region.entry_m[rows][:, None, :], region.exit_m[rows][:, None, :]
+        limit = limits[:, :, None]
+        total += region.density * (np.minimum(exit_, limit) - np.minimum(entry, limit)).sum(axis=2)
+    return total
+
+
+def _depth_edges(hits: BeamHits, params: PhysicalParams) -> np.ndarray:
+    """Beams whose neighbour meets another object or a range differing by more than `edge_jump`."""
+    ranges = np.where(np.isfinite(hits.solid_range_m), hits.solid_range_m, -1.0)
+    objects = hits.object_index
+    edge = np.zeros(len(ranges), dtype=bool)
+    jump = (objects[1:] != objects[:-1]) | (np.abs(ranges[1:] - ranges[:-1]) > params.edge_jump * np.maximum(ranges[1:], ranges[:-1]))
+    edge[1:] |= jump
+    edge[:-1] |= jump
+    return edge
+
+
+def _surfaces(
+    hits: BeamHits,
+    beams: Beams,
+    crossings: BeamPuffCrossings,
+    factor: np.ndarray,
+    receiver: ReceiverOptics,
+    params: PhysicalParams,
+) -> Surfaces:
+    n = len(hits)
+    sub_rays = params.sub_rays if params.mixed_pixels else 1
+    ranges = np.full((n, sub_rays), np.inf)
+    ranges[:, 0] = hits.solid_range_m
+    objects = np.full((n, sub_rays), -1, dtype=np.int64)
+    objects[:, 0] = hits.object_index
+    reflectivity = np.zeros((n, sub_rays))
+    reflectivity[:, 0] = hits.reflectivity
+    cosine = np.zeros((n, sub_rays))
+    cosine[:, 0] = hits.cos_incidence
+    region_path = np.zeros((n, sub_rays))
+    region_path[:, 0] = hits.region_optical_path
+    used = np.zeros((n, sub_rays), dtype=bool)
+    used[:, 0] = True
+    edge_rows = np.flatnonzero(_depth_edges(hits, params)) if sub_rays > 1 else np.zeros(0, dtype=np.int64)
+    if len(edge_rows):
+        offsets = ((np.arange(sub_rays) + 0.5) / sub_rays - 0.5) * receiver.footprint_rad
+        angles = (beams.angles_rad[edge_rows][:, None] + offsets).ravel()
+        origins, directions = scan_plane_rays(beams.sensor.pose, angles)
+        sub_hits = beams.world.cast(origins, directions, hits.max_range_m, beams.time_s)
+        ranges[edge_rows] = sub_hits.solid_range_m.reshape(-1, sub_rays)
+        objects[edge_rows] = sub_hits.object_index.reshape(-1, sub_rays)
+        reflectivity[edge_rows] = sub_hits.reflectivity.reshape(-1, sub_rays)
+        cosine[edge_rows] = sub_hits.cos_incidence.reshape(-1, sub_rays)
+        region_path[edge_rows] = _region_path_to(hits, edge_rows, np.minimum(ranges[edge_rows], hits.max_range_m))
+        used[edge_rows] = True
+    present = used & np.isfinite(ranges)
+    puff_path = crossings.optical_path_to(np.where(present, ranges, 0.0))
+    optical_path = factor[:, None] * (region_path + puff_path)
+    angle_exponent, stretch, patchiness = _material_arrays(beams, objects, params)
+    if params.material_effects and np.any(patchiness):
+        points = beams.origins[:, None, :] + beams.directions[:, None, :] * np.where(present, ranges, 0.0)[:, :, None]
+        reflectivity = reflectivity * np.exp(patchiness * patch_values(points.reshape(-1, 3), beams.scene.seed).reshape(n, sub_rays))
+    extinction = beams.scene.density_to_extinction
+    cos_factor = cosine**angle_exponent
+    log_each = log_target_echo(reflectivity, cos_factor, ranges, optical_path, extinction, receiver, params)
+    log_each = np.where(present, log_each, -np.inf)
+    shares = used.sum(axis=1, keepdims=True)
+    amp = np.exp(log_each) / shares
+    single = shares[:, 0] == 1
+    with np.errstate(divide="ignore"):
+        log_echo = np.where(single, log_each[:, 0], np.log(amp.sum(axis=1)))
+    apparent = ranges * (1.0 + stretch * 2.0 * extinction * optical_path)
+    return Surfaces(log_echo, amp, np.where(present, apparent, np.inf), present)
+
+
+def _material_arrays(beams: Beams, objects: np.ndarray, params: PhysicalParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per sub-ray: angle exponent, range stretch and patchiness of the material hit."""
+    materials = [optics_for(obj.material) for obj in beams.scene.objects]
+    if not params.material_effects or not materials:
+        return np.ones(objects.shape), np.zeros(objects.shape), np.zeros(objects.shape)
+    table = np.array([[m.angle_exponent, m.range_stretch, m.patchiness] for m in materials] + [[1.0, 0.0, 0.0]])
+    picked = table[np.where(objects >= 0, objects, len(materials))]
+    return picked[..., 0], picked[..., 1], picked[..., 2]
+
+
+def _smoke_echoes(
+    hits: BeamHits,
+    crossings: BeamPuffCrossings,
+    factor: np.ndarray,
+    start: np.ndarray,
+    end: np.ndarray,
+    extinction: float,
+    receiver: ReceiverOptics,
+    params: PhysicalParams,
+) -> SmokeEchoes:
+    n = len(hits)
+    has_smoke = np.isfinite(start) & (end > start)
+    if not params.backscatter or not has_smoke.any():
+        zeros = np.zeros((n, 1))
+        return SmokeEchoes(zeros, zeros, np.zeros((n, 2)))
+    low = np.where(has_smoke, start, 0.0)
+    high = np.where(has_smoke, end, 0.0)
+    edges = low[:, None] + (high - low)[:, None] * np.linspace(0.0, 1.0, params.bins + 1)
+    rows = np.arange(n)
+    region_path = _region_path_to(hits, rows, edges)
+    puff_path = crossings.optical_path_to(edges)
+    region_step, puff_step = np.diff(region_path, axis=1), np.diff(puff_path, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = (params.region_backscatter * region_step + params.plume_backscatter * puff_step) / (region_step + puff_step)
+    share = np.nan_to_num(share)
+    transmission = np.exp(-2.0 * extinction * factor[:, None] * (region_path + puff_path))
+    mid = 0.5 * (edges[:, 1:] + edges[:, :-1])
+    return SmokeEchoes(smoke_bin_echo(transmission, share, mid, receiver, params), mid, edges)

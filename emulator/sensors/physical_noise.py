@@ -1,0 +1,95 @@
+"""Deterministic randomness of the `physical` model: density fluctuations and range noise.
+
+Every draw derives from (scene seed, sensor name) and, for per-scan noise,
+the scan time, so a scan is reproducible from the scene alone.
+"""
+
+from __future__ import annotations
+
+import zlib
+
+import numpy as np
+
+from emulator.scene.plumes import splitmix64
+from emulator.sensors.physical_params import LMS_SIGMA_M, LMS_SYSTEMATIC_M, PhysicalParams, urg_noise_sigma_m
+
+_FLUCTUATION_STREAM = 0xF1
+_NOISE_STREAM = 0x4E
+_BIAS_STREAM = 0xB1
+_FLUCTUATION_ANGLE_RAD = np.radians(2.0)  # angular correlation of the fluctuation field (assumption)
+
+
+def _sensor_key(seed: int, sensor: str) -> list[int]:
+    return [seed % 2**63, zlib.crc32(sensor.encode())]
+
+
+def scan_rng(seed: int, sensor: str, time_s: float) -> np.random.Generator:
+    """The generator for one scan's noise: a pure function of (seed, sensor, scan time in µs)."""
+    return np.random.default_rng(_sensor_key(seed, sensor) + [_NOISE_STREAM, int(round(time_s * 1e6)) % 2**63])
+
+
+def fluctuation_field(seed: int, sensor: str, angles_rad: np.ndarray, time_s: float, params: PhysicalParams) -> np.ndarray:
+    """A smooth field in (beam angle, time) with zero median and unit variance.
+
+    A sum of random travelling cosines (random wavenumbers, frequencies and
+    phases fixed per seed and sensor): correlated over about 2° and
+    `fluctuation_time_s`, so neighbouring beams and consecutive scans flicker
+    together.
+    """
+    rng = np.random.default_rng(_sensor_key(seed, sensor) + [_FLUCTUATION_STREAM])
+    modes = params.fluctuation_modes
+    wavenumber = rng.normal(0.0, 1.0 / _FLUCTUATION_ANGLE_RAD, modes)
+    frequency = rng.normal(0.0, 2.0 * np.pi / params.fluctuation_time_s, modes)
+    phase = rng.uniform(0.0, 2.0 * np.pi, modes)
+    argument = np.outer(angles_rad, wavenumber) + frequency * time_s + phase
+    return np.sqrt(2.0 / modes) * np.cos(argument).sum(axis=1)
+
+
+def edge_strength(column: np.ndarray, angles_rad: np.ndarray, smoke_distance_m: np.ndarray, length_m: float) -> np.ndarray:
+    """How much a beam lies on a smoke edge, 0..1: the column's relative lateral gradient × length_m.
+
+    The gradient is taken between neighbouring beams (lateral spacing =
+    angle step × distance to the smoke), so homogeneous smoke gives 0 and a
+    plume's flank close to 1.
+    """
+    if len(column) < 3:
+        return np.zeros(len(column))
+    padded = np.concatenate([column[:1], column, column[-1:]])
+    angles = np.concatenate([angles_rad[:1] - (angles_rad[1] - angles_rad[0]), angles_rad, angles_rad[-1:] + (angles_rad[-1] - angles_rad[-2])])
+    spacing = np.abs(angles[2:] - angles[:-2]) * np.maximum(smoke_distance_m, 0.1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        relative = np.abs(padded[2:] - padded[:-2]) / (spacing * column)
+    return np.clip(np.nan_to_num(relative * length_m, nan=0.0, posinf=1.0), 0.0, 1.0)
+
+
+def fluctuation_factor(
+    seed: int,
+    sensor: str,
+    angles_rad: np.ndarray,
+    time_s: float,
+    column: np.ndarray,
+    smoke_distance_m: np.ndarray,
+    params: PhysicalParams,
+) -> np.ndarray:
+    """Per beam, the factor scaling all its smoke's density: exp(amplitude × field), median 1."""
+    if not params.fluctuation:
+        return np.ones(len(angles_rad))
+    edges = edge_strength(column, angles_rad, smoke_distance_m, params.fluctuation_length_m)
+    amplitude = params.fluctuation_bulk + params.fluctuation_edge * edges
+    return np.exp(amplitude * fluctuation_field(seed, sensor, angles_rad, time_s, params))
+
+
+def urg_range_noise_m(rng: np.random.Generator, range_m: np.ndarray) -> np.ndarray:
+    """Random clear-air error of the URG-04LX (datasheet accuracy read as a 2σ bound)."""
+    return rng.standard_normal(len(range_m)) * urg_noise_sigma_m(np.where(np.isfinite(range_m), range_m, 0.0))
+
+
+def lms_range_error_m(rng: np.random.Generator, seed: int, sensor: str, device_angles_deg: np.ndarray) -> np.ndarray:
+    """LMS200 error: a fixed systematic offset per beam direction (uniform in ±15 mm) plus σ = 5 mm noise."""
+    quarter_degrees = np.rint(np.asarray(device_angles_deg) * 4.0).astype(np.int64).astype(np.uint64)
+    key = np.uint64(zlib.crc32(sensor.encode()) ^ (seed % 2**32) << 32) ^ np.uint64(_BIAS_STREAM)
+    with np.errstate(over="ignore"):
+        bits = splitmix64(quarter_degrees ^ key)
+    uniform = (bits >> np.uint64(11)).astype(np.float64) * 2.0**-53
+    systematic = LMS_SYSTEMATIC_M * (2.0 * uniform - 1.0)
+    return systematic + rng.standard_normal(len(quarter_degrees)) * LMS_SIGMA_M
