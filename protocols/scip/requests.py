@@ -25,10 +25,6 @@ class ScanRequest:
     interval: int = 0  # rotations skipped between streamed scans
     count: int = 1  # 0 = unlimited
 
-    @property
-    def value_count(self) -> int:
-        return -(-(self.end - self.start + 1) // self.cluster)
-
 
 def parse_scan_request(params: bytes, *, streaming: bool) -> ScanRequest | bytes:
     """The request in `params` (exact length already checked), or a status."""
