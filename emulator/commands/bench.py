@@ -1,15 +1,180 @@
-"""`lrf-emulator bench` (CLI.md). PLACEHOLDER: replaced by the module's owner."""
+"""`lrf-emulator bench [--json] [--quick]`: the simulation's speed on this machine.
+
+The report is a list of sections. Each section is a function
+`(quick: bool) -> BenchSection`: `data` is merged into the JSON object and
+`lines` are printed in the table. Add a section by appending to `SECTIONS`.
+
+- rays: plain Embree INTERSECT versus our full cast (`World.cast`) on the same
+  beams of every bundled scene's sensors with the smoke removed; several scans
+  are batched per call, as a daemon with several clients would. `ratio` is
+  ours/raw in rays per second over all scenes.
+- scans: one scan's compute time per bundled scene and sensor, with smoke,
+  against the sensor's period: URG-04LX 100 ms; LMS200 the scan its scene
+  options select against the time the mirror needs for it (1° → 1 revolution
+  of 13.33 ms, 0.5° → 2, 0.25° → 4; the default 361-value scan: 26.67 ms).
+- memory: peak resident set size of this process.
+"""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import json
+import resource
+import sys
+import time
+from dataclasses import dataclass
+from typing import Callable
 
-from emulator.errors import UserError
+import numpy as np
+
+from emulator.commands.scan import lms_scan_window
+from emulator.optics import World
+from emulator.scene import bundled_scenes, load_scene
+from emulator.scene.model import Scene, SensorSpec
+from emulator.sensors import LmsSensor, create_sensor, lms200, urg04lx
+from emulator.sensors.beam_geometry import scan_plane_rays
+
+SCANS_PER_BATCH = 16
+LMS_REVOLUTIONS = {1.0: 1, 0.5: 2, 0.25: 4}
+
+
+@dataclass(frozen=True)
+class BenchSection:
+    data: dict
+    lines: list[str]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    pass
+    parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    parser.add_argument("--quick", action="store_true", help="few repetitions (a smoke test of the bench itself)")
+
+
+def _scenes() -> list[Scene]:
+    return [load_scene(bundled.name) for bundled in bundled_scenes()]
+
+
+def _sensor_beams(spec: SensorSpec) -> tuple[np.ndarray, np.ndarray, float]:
+    """Origins, directions and cast range of one scan of the sensor (valid URG steps; the LMS's window)."""
+    if spec.model == urg04lx.MODEL:
+        angles = urg04lx.step_angles_rad()[urg04lx.FIRST_VALID_STEP : urg04lx.LAST_VALID_STEP + 1]
+        origins, directions = scan_plane_rays(spec.pose, angles)
+        return origins, directions, urg04lx.MAX_RANGE_M
+    window = lms_scan_window(dict(spec.options))
+    angles = np.radians(lms200.device_angles_deg(window["start_deg"], window["step_deg"], window["count"]) - 90.0)
+    origins, directions = scan_plane_rays(spec.pose, angles)
+    return origins, directions, lms200.REACH_M
+
+
+def _best_seconds(function: Callable[[], object], repeats: int) -> float:
+    """The fastest of `repeats` timed calls: the machine's speed, not its other load."""
+    best = np.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        function()
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def rays_section(quick: bool) -> BenchSection:
+    repeats = 3 if quick else 30
+    rows, raw_total, ours_total, rays_total = [], 0.0, 0.0, 0
+    for scene in _scenes():
+        world = World(dataclasses.replace(scene, regions=(), plumes=()))
+        for spec in scene.sensors:
+            origins, directions, max_range = _sensor_beams(spec)
+            origins = np.ascontiguousarray(np.tile(origins, (SCANS_PER_BATCH, 1)), dtype=np.float32)
+            directions = np.ascontiguousarray(np.tile(directions, (SCANS_PER_BATCH, 1)), dtype=np.float32)
+            raw = _best_seconds(lambda: world.first_triangles(origins, directions, max_range), repeats)
+            ours = _best_seconds(lambda: world.cast(origins, directions, max_range, 0.0), repeats)
+            rays = len(origins)
+            rows.append({
+                "scene": scene.path.stem if scene.path else scene.name,
+                "sensor": spec.name,
+                "rays": rays,
+                "raw_rays_per_s": rays / raw,
+                "ours_rays_per_s": rays / ours,
+                "ratio": raw / ours,
+            })
+            raw_total, ours_total, rays_total = raw_total + raw, ours_total + ours, rays_total + rays
+    ratio = raw_total / ours_total
+    lines = [f"rays: plain Embree INTERSECT vs our cast, smoke removed, {SCANS_PER_BATCH} scans per call"]
+    lines.append(f"  {'scene':<10} {'sensor':<8} {'rays':>6} {'raw Mrays/s':>12} {'ours Mrays/s':>13} {'ratio':>6}")
+    for row in rows:
+        lines.append(
+            f"  {row['scene']:<10} {row['sensor']:<8} {row['rays']:>6} {row['raw_rays_per_s'] / 1e6:>12.2f}"
+            f" {row['ours_rays_per_s'] / 1e6:>13.2f} {row['ratio']:>6.2f}"
+        )
+    lines.append(f"  overall ratio (ours/raw): {ratio:.2f} (target >= 0.5)")
+    return BenchSection({"ratio": ratio, "rays": rows}, lines)
+
+
+def _scan_once(sensor, time_s: float) -> None:
+    if isinstance(sensor, LmsSensor):
+        sensor.scan(time_s, **lms_scan_window(dict(sensor.spec.options)))
+    else:
+        sensor.scan(time_s)
+
+
+def _period_ms(spec: SensorSpec) -> float:
+    if spec.model == urg04lx.MODEL:
+        return urg04lx.PERIOD_S * 1000.0
+    revolutions = LMS_REVOLUTIONS[float(spec.options.get("resolution_deg", 0.5))]
+    return revolutions * lms200.PERIOD_S * 1000.0
+
+
+def scans_section(quick: bool) -> BenchSection:
+    """Mean compute time of scans spread over the first minute of each scene (smoke on)."""
+    times = np.linspace(1.0, 60.0, 5 if quick else 60)
+    rows = []
+    for scene in _scenes():
+        world = World(scene)
+        for spec in scene.sensors:
+            sensor = create_sensor(scene, spec.name, world)
+            _scan_once(sensor, 0.0)  # first call pays one-off set-up
+            durations = []
+            for time_s in times:
+                start = time.perf_counter()
+                _scan_once(sensor, float(time_s))
+                durations.append(time.perf_counter() - start)
+            scan_ms = float(np.mean(durations)) * 1000.0
+            period_ms = _period_ms(spec)
+            rows.append({
+                "scene": scene.path.stem if scene.path else scene.name,
+                "sensor": spec.name,
+                "model": spec.model,
+                "scan_ms": scan_ms,
+                "max_scan_ms": float(np.max(durations)) * 1000.0,
+                "period_ms": period_ms,
+                "fraction": scan_ms / period_ms,
+            })
+    lines = [f"scans: compute time per scan with smoke (mean over {len(times)} instants in 1..60 s)"]
+    lines.append(f"  {'scene':<10} {'sensor':<8} {'model':<9} {'scan ms':>8} {'max ms':>7} {'period ms':>10} {'fraction':>9}")
+    for row in rows:
+        lines.append(
+            f"  {row['scene']:<10} {row['sensor']:<8} {row['model']:<9} {row['scan_ms']:>8.2f} {row['max_scan_ms']:>7.2f}"
+            f" {row['period_ms']:>10.2f} {row['fraction']:>8.1%}"
+        )
+    return BenchSection({"scans": rows}, lines)
+
+
+def memory_section(quick: bool) -> BenchSection:
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
+    return BenchSection({"peak_rss_mb": peak_mb}, [f"memory: peak RSS {peak_mb:.1f} MB"])
+
+
+SECTIONS: list[Callable[[bool], BenchSection]] = [rays_section, scans_section, memory_section]
 
 
 def run(args: argparse.Namespace) -> int:
-    raise UserError("not implemented yet")
+    sections = [section(args.quick) for section in SECTIONS]
+    if args.json:
+        report: dict = {}
+        for section in sections:
+            report.update(section.data)
+        json.dump(report, sys.stdout)
+        sys.stdout.write("\n")
+    else:
+        for section in sections:
+            sys.stdout.write("\n".join(section.lines) + "\n\n")
+    return 0

@@ -121,7 +121,7 @@ def _ray_triangle_crossings(
         q = np.cross(s, edge1[None, :, :])
         v = np.einsum("nk,ntk->nt", directions, q) * inv_det
         t = np.einsum("tk,ntk->nt", edge2, q) * inv_det
-    hit = (det != 0.0) & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > 0.0)
+        hit = (det != 0.0) & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > 0.0)
     orientation = np.sign(directions @ normals.T)
     return np.where(hit, t, np.inf), np.where(hit, orientation, 0.0)
 
@@ -152,9 +152,10 @@ def mesh_intervals(
     distances = np.take_along_axis(distances, order, axis=1)
     orientations = np.take_along_axis(orientations, order, axis=1)
     duplicate = np.zeros_like(distances, dtype=bool)
-    duplicate[:, 1:] = (np.abs(np.diff(distances, axis=1)) < _SAME_CROSSING_M) & (
-        orientations[:, 1:] == orientations[:, :-1]
-    )
+    with np.errstate(invalid="ignore"):  # inf − inf between two misses
+        duplicate[:, 1:] = (np.abs(np.diff(distances, axis=1)) < _SAME_CROSSING_M) & (
+            orientations[:, 1:] == orientations[:, :-1]
+        )
     orientations = np.where(duplicate, 0.0, orientations)
     most = int((orientations != 0).sum(axis=1).max(initial=0))
     keep = np.argsort(orientations == 0, axis=1, kind="stable")[:, :most]

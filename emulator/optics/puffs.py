@@ -117,14 +117,10 @@ def cross_beams(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_
     if len(puffs) == 0 or len(origins) == 0:
         empty = np.zeros(0)
         return BeamPuffCrossings(np.zeros(0, dtype=np.int64), empty, empty, empty, empty)
-    centers = puffs.centers
-    along = directions @ centers.T - np.einsum("ij,ij->i", origins, directions)[:, None]
-    distance_sq = (
-        np.einsum("ij,ij->i", centers, centers)[None, :]
-        - 2.0 * (origins @ centers.T)
-        + np.einsum("ij,ij->i", origins, origins)[:, None]
-    )
-    miss_sq = np.maximum(distance_sq - along * along, 0.0)
+    puffs = _near_segments(puffs, origins, directions, beam_end_m)
+    offsets = [puffs.centers[None, :, axis] - origins[:, axis, None] for axis in range(3)]
+    along = sum(offset * directions[:, axis, None] for axis, offset in enumerate(offsets))
+    miss_sq = np.maximum(sum(offset * offset for offset in offsets) - along * along, 0.0)
     reach = REACH_SIGMAS * puffs.sigma[None, :]
     near = (miss_sq < reach * reach) & (along > -reach) & (along < beam_end_m[:, None] + reach)
     beam, puff = np.nonzero(near)
@@ -132,3 +128,13 @@ def cross_beams(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_
     along_m = along[beam, puff]
     column = puffs.peak_density[puff] * np.sqrt(2.0 * np.pi) * sigma * np.exp(-miss_sq[beam, puff] / (2.0 * sigma * sigma))
     return BeamPuffCrossings(beam, along_m, sigma, column, normal_cdf(-along_m / sigma))
+
+
+def _near_segments(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray) -> Puffs:
+    """The puffs within reach of the box bounding all beam segments (a cheap first cut)."""
+    ends = origins + directions * np.where(np.isfinite(beam_end_m), beam_end_m, 0.0)[:, None]
+    lower = np.minimum(origins.min(axis=0), ends.min(axis=0))
+    upper = np.maximum(origins.max(axis=0), ends.max(axis=0))
+    reach = REACH_SIGMAS * puffs.sigma[:, None]
+    keep = np.all((puffs.centers + reach >= lower) & (puffs.centers - reach <= upper), axis=1)
+    return Puffs(puffs.centers[keep], puffs.sigma[keep], puffs.peak_density[keep])

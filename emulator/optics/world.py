@@ -28,20 +28,20 @@ class World:
     def __init__(self, scene: Scene) -> None:
         self.scene = scene
         meshes = [world_mesh(obj.shape, obj.pose) for obj in scene.objects]
-        self._triangles = (
-            np.concatenate([m.triangles for m in meshes]) if meshes else np.zeros((0, 3, 3))
+        triangles = np.concatenate([m.triangles for m in meshes]) if meshes else np.zeros((0, 3, 3))
+        normals = np.concatenate([m.face_normals for m in meshes]) if meshes else np.zeros((0, 3))
+        # per triangle: unit normal n and offset n·v0, so a hit's range is (n·v0 − n·o) / (n·d)
+        self._triangle_planes = np.concatenate(
+            [normals, np.einsum("ij,ij->i", normals, triangles[:, 0])[:, None]], axis=1
         ).astype(np.float64)
         self._triangle_object = np.concatenate(
             [np.full(len(m.faces), i, dtype=np.int64) for i, m in enumerate(meshes)] or [np.zeros(0, np.int64)]
         )
-        self._triangle_normals = (
-            np.concatenate([m.face_normals for m in meshes]) if meshes else np.zeros((0, 3))
-        ).astype(np.float64)
         self._object_reflectivity = np.array([self._reflectivity(obj.material) for obj in scene.objects], dtype=float)
         self._embree: EmbreeScene | None = None
-        if len(self._triangles):
+        if len(triangles):
             self._embree = EmbreeScene()
-            TriangleMesh(self._embree, self._triangles.astype(np.float32))
+            TriangleMesh(self._embree, triangles.astype(np.float32))
         self._region_meshes: dict[int, trimesh.Trimesh] = {
             i: shape_mesh(region.shape) for i, region in enumerate(scene.regions) if isinstance(region.shape, MeshFile)
         }
@@ -69,10 +69,9 @@ class World:
         )
 
     def cast(self, origins: np.ndarray, directions: np.ndarray, max_range_m: float, time_s: float) -> BeamHits:
-        """Cast beams from `origins` (N, 3) along `directions` (N, 3; normalised here) at `time_s`."""
+        """Cast beams from `origins` (N, 3) along unit `directions` (N, 3) at `time_s`."""
         origins = np.asarray(origins, dtype=float)
         directions = np.asarray(directions, dtype=float)
-        directions = directions / np.linalg.norm(directions, axis=1, keepdims=True)
         solid_range, object_index, reflectivity, cos_incidence = self._solids(origins, directions, max_range_m)
         beam_end = np.minimum(solid_range, max_range_m)
         regions = tuple(self._region_crossing(i, origins, directions, max_range_m, time_s) for i in range(len(self.scene.regions)))
@@ -97,27 +96,23 @@ class World:
     def _solids(
         self, origins: np.ndarray, directions: np.ndarray, max_range_m: float
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """First solid hit per beam; the distance recomputed in float64 from the hit triangle's plane."""
+        if self._embree is None:
+            nothing = np.zeros(len(origins))
+            return np.full(len(origins), np.inf), np.full(len(origins), -1, dtype=np.int64), nothing, nothing.copy()
         triangle = self.first_triangles(origins, directions, max_range_m)
-        hit = triangle >= 0
-        safe = np.where(hit, triangle, 0)
-        solid_range = np.full(len(origins), np.inf)
-        object_index = np.full(len(origins), -1, dtype=np.int64)
-        reflectivity = np.zeros(len(origins))
-        cos_incidence = np.zeros(len(origins))
-        if not hit.any():
-            return solid_range, object_index, reflectivity, cos_incidence
-        normals = self._triangle_normals[safe]
-        facing = np.einsum("ij,ij->i", normals, directions)
-        vertex_offset = np.einsum("ij,ij->i", normals, self._triangles[safe, 0] - origins)
+        planes = self._triangle_planes.take(triangle, axis=0, mode="clip")  # -1 (no hit) reads row 0, masked below
+        facing = np.einsum("ij,ij->i", planes[:, :3], directions)
         with np.errstate(divide="ignore", invalid="ignore"):
-            exact_range = vertex_offset / facing
-        hit &= exact_range <= max_range_m
-        solid_range = np.where(hit, exact_range, np.inf)
-        objects = self._triangle_object[safe]
-        object_index = np.where(hit, objects, -1)
-        reflectivity = np.where(hit, self._object_reflectivity[objects], 0.0)
-        cos_incidence = np.where(hit, np.abs(facing), 0.0)
-        return solid_range, object_index, reflectivity, cos_incidence
+            exact_range = (planes[:, 3] - np.einsum("ij,ij->i", planes[:, :3], origins)) / facing
+        hit = (triangle >= 0) & (exact_range <= max_range_m)
+        objects = np.where(hit, self._triangle_object.take(triangle, mode="clip"), -1)
+        return (
+            np.where(hit, exact_range, np.inf),
+            objects,
+            np.where(hit, self._object_reflectivity.take(objects, mode="clip"), 0.0),
+            np.where(hit, np.abs(facing), 0.0),
+        )
 
     def _region_crossing(
         self, index: int, origins: np.ndarray, directions: np.ndarray, max_range_m: float, time_s: float
