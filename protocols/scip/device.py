@@ -21,7 +21,7 @@ from protocols.scip.framing import Line, LineSplitter
 from protocols.scip.identity import (
     DEFAULT_BIT_RATE,
     DEFAULT_SERIAL,
-    Status,
+    LiveState,
     parameter_body,
     status_body,
     version_body,
@@ -202,8 +202,8 @@ class UrgDevice:
         if code == b"PP":
             return _reply(echo, b"00", parameter_body())
         if code == b"II":
-            status = Status(self._laser_on, self._speed_level, self._bit_rate, self._timer_ms(now))
-            return _reply(echo, b"00", status_body(status))
+            state = LiveState(self._laser_on, self._speed_level, self._bit_rate, self._timer_ms(now))
+            return _reply(echo, b"00", status_body(state))
         if code == b"BM":
             if self._laser_on:
                 return _reply(echo, b"02")

@@ -64,7 +64,7 @@ def parameter_body() -> bytes:
 
 
 @dataclass(frozen=True)
-class Status:
+class LiveState:
     """What II reports: live device state."""
 
     laser_on: bool
@@ -73,7 +73,7 @@ class Status:
     timer_ms: int  # the 24-bit device timer
 
 
-def status_body(status: Status) -> bytes:
+def status_body(state: LiveState) -> bytes:
     """The II lines: exactly 7, as hokuyo_node and urg_library expect.
 
     MESM is CLASSIC while the laser is on (real capture) and IDLE while it is
@@ -81,22 +81,22 @@ def status_body(status: Status) -> bytes:
     capture; SCSP keeps a 7-letter word before `(` so parsers written for
     `Initial(600[rpm])` still read the rpm.
     """
-    if status.speed_level == 0:
+    if state.speed_level == 0:
         speed = f"Initial({DEFAULT_RPM}[rpm])<-Default setting by user"
     else:
-        speed = f"Changed({DEFAULT_RPM - RPM_PER_SPEED_LEVEL * status.speed_level}[rpm])"
-    if status.bit_rate == DEFAULT_BIT_RATE:
+        speed = f"Changed({DEFAULT_RPM - RPM_PER_SPEED_LEVEL * state.speed_level}[rpm])"
+    if state.bit_rate == DEFAULT_BIT_RATE:
         bit_rate = f"{DEFAULT_BIT_RATE}[bps]<-Default setting by user"
     else:
-        bit_rate = f"{status.bit_rate}[bps]"
+        bit_rate = f"{state.bit_rate}[bps]"
     return b"".join(
         (
             info_line("MODL", MODEL),
-            info_line("LASR", "ON" if status.laser_on else "OFF"),
+            info_line("LASR", "ON" if state.laser_on else "OFF"),
             info_line("SCSP", speed),
-            info_line("MESM", "CLASSIC" if status.laser_on else "IDLE"),
+            info_line("MESM", "CLASSIC" if state.laser_on else "IDLE"),
             info_line("SBPS", bit_rate),
-            info_line("TIME", f"{status.timer_ms:06X}"),
+            info_line("TIME", f"{state.timer_ms:06X}"),
             info_line("STAT", "Sensor works well."),
         )
     )
