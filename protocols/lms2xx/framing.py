@@ -2,7 +2,8 @@
 that finds host telegrams in a byte stream and resynchronises after garbage.
 
 A telegram is `STX ADDR LEN_lo LEN_hi CMD DATA… [STATUS] CRC_lo CRC_hi`; LEN
-counts CMD through STATUS, so a telegram is LEN + 6 bytes, at most 812.
+counts CMD through STATUS, so a telegram is LEN + 6 bytes, at most 812 (814
+for a 0.25° scan with real-time indices, TL Table 10-16).
 """
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ ACK = b"\x06"
 NAK = b"\x15"
 HOST_ADDRESS = 0x00
 REPLY_ADDRESS_FLAG = 0x80  # device → host telegrams carry the address + 0x80
-MAX_TELEGRAM_BYTES = 812
+MAX_TELEGRAM_BYTES = 812  # the bound on what the reader accepts from a host
+MAX_REPLY_BYTES = 814  # 100°/0.25° scan (812 bytes) plus the two real-time indices
 FRAME_OVERHEAD = 6  # STX, ADDR, LEN (2), CRC (2)
 MAX_LENGTH_FIELD = MAX_TELEGRAM_BYTES - FRAME_OVERHEAD
 HEADER_BYTES = 4
@@ -44,13 +46,13 @@ def _power_table(rows: int) -> np.ndarray:
     return table
 
 
-_POWERS = _power_table(MAX_TELEGRAM_BYTES + 8)
+_POWERS = _power_table(MAX_REPLY_BYTES + 8)
 
 
 def crc16(data: bytes) -> int:
-    """The LMS2xx CRC (TL §9) of `data` (STX through STATUS), at most 812 bytes."""
-    if len(data) > MAX_TELEGRAM_BYTES:
-        raise ValueError(f"crc16 covers at most {MAX_TELEGRAM_BYTES} bytes, got {len(data)}")
+    """The LMS2xx CRC (TL §9) of `data` (STX through STATUS), at most 814 bytes."""
+    if len(data) > MAX_REPLY_BYTES:
+        raise ValueError(f"crc16 covers at most {MAX_REPLY_BYTES} bytes, got {len(data)}")
     octets = np.frombuffer(data, dtype=np.uint8)
     if octets.size == 0:
         return 0
@@ -67,8 +69,9 @@ def build_telegram(address: int, body: bytes) -> bytes:
     """
     if not 0 <= address <= 0xFF:
         raise ValueError(f"address must be a byte, got {address}")
-    if not 1 <= len(body) <= MAX_LENGTH_FIELD:
-        raise ValueError(f"telegram body must be 1..{MAX_LENGTH_FIELD} bytes, got {len(body)}")
+    longest = MAX_REPLY_BYTES - FRAME_OVERHEAD
+    if not 1 <= len(body) <= longest:
+        raise ValueError(f"telegram body must be 1..{longest} bytes, got {len(body)}")
     head = bytes((STX, address)) + len(body).to_bytes(2, "little") + body
     return head + crc16(head).to_bytes(2, "little")
 

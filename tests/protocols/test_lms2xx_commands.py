@@ -253,6 +253,10 @@ def test_real_time_indices(device: Lms200Device) -> None:
     revolution = int(now * 75 // 2) * 2
     assert first[-5:-3] == bytes((revolution % 256, first[-4]))
     assert second[-5] == (revolution + 2) % 256 and second[-4] == (first[-4] + 1) % 256
+    assert ask(device, bytes.fromhex("3B 64 00 19 00"))[1][5] == 0x01
+    quarter_degree = ask(device, b"\x30\x01")[1]
+    assert len(quarter_degree) == 814  # Table 10-16: 0.25° with indices, beyond the usual 812
+    assert crc16(quarter_degree[:-2]) == int.from_bytes(quarter_degree[-2:], "little")
 
 
 def test_status_block_live_fields(source: Source) -> None:
