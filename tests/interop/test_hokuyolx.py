@@ -17,14 +17,14 @@ import pytest
 from hokuyolx import HokuyoLX
 from hokuyolx.exceptions import HokuyoStatusException
 
-from .conftest import urg_step_values
+from interop_support import urg_step_values
 
 STEPS = 725 - 44 + 1  # 682
 
 
 @pytest.fixture
-def laser(serve, room_scene: Path, tcp_port: int):
-    daemon = serve(room_scene, f"urg=tcp:127.0.0.1:{tcp_port}")
+def laser(serve, urg_room: Path, tcp_port: int):
+    daemon = serve(urg_room, f"urg=tcp:127.0.0.1:{tcp_port}")
     client = HokuyoLX(addr=daemon.endpoint("urg", "tcp").address, tsync=False, convert_time=False)
     yield client
     client.close()
@@ -36,23 +36,23 @@ def test_parameters_learned_from_pp(laser: HokuyoLX) -> None:
     assert laser.model == "URG-04LX(Hokuyo Automatic Co.,Ltd.)"
 
 
-def test_get_dist_equals_the_scan_command(laser: HokuyoLX, room_scene: Path) -> None:
+def test_get_dist_equals_the_scan_command(laser: HokuyoLX, urg_room: Path) -> None:
     timestamp_ms, values = laser.get_dist()
     assert values.shape == (STEPS,)
-    expected = urg_step_values(room_scene, timestamp_ms / 1000.0)
+    expected = urg_step_values(urg_room, timestamp_ms / 1000.0)
     np.testing.assert_array_equal(values, expected)
     assert np.any(values < 20), "the smoke block should give error codes"
     assert np.any(values >= 20)
 
 
-def test_md_three_scans_cluster_3(laser: HokuyoLX, room_scene: Path) -> None:
+def test_md_three_scans_cluster_3(laser: HokuyoLX, urg_room: Path) -> None:
     received = list(laser.iter_dist(3, grouping=3))
     assert [pending for _, _, pending in received] == [2, 1, 0]
     assert all(scan.shape == (228,) for scan, _, _ in received)  # ceil(682 / 3)
     stamps = [stamp for _, stamp, _ in received]
     assert np.all(np.diff(stamps) == 100), stamps
     # Where a cluster holds no error value its output is the minimum of its 3 steps.
-    steps = urg_step_values(room_scene, stamps[0] / 1000.0)
+    steps = urg_step_values(urg_room, stamps[0] / 1000.0)
     padded = np.concatenate([steps, np.full(228 * 3 - STEPS, 10**6)]).reshape(228, 3)
     clean = np.all(padded >= 20, axis=1)
     assert clean.sum() > 150

@@ -21,8 +21,8 @@ def test_line_rate_limits() -> None:
     assert line_rate_limit(500000, 1.0) == 75.0
 
 
-def test_short_measurement_through_the_daemon(room_scene: Path) -> None:
-    result = lms_scan_rates(room_scene, bauds=(38400, 500000), resolutions_deg=(1.0,), duration_s=1.0)
+def test_short_measurement_through_the_daemon(lms_room: Path) -> None:
+    result = lms_scan_rates(lms_room, bauds=(38400, 500000), resolutions_deg=(1.0,), duration_s=1.0)
     rows = result["rows"]
     assert [(row["baud"], row["resolution_deg"]) for row in rows] == [(38400, 1.0), (500000, 1.0)]
     for row in rows:

@@ -17,7 +17,7 @@ import pytest
 
 from emulator.lms_serial_client import ACK, LmsSerialClient, Telegram
 
-from .conftest import scan_values
+from interop_support import scan_values
 
 A0_OK = bytes.fromhex("02 80 03 00 A0 00 10 16 0A")  # verified vector: A0, OK, status 0x10
 
@@ -32,8 +32,8 @@ def first_events(client: LmsSerialClient, count: int, timeout_s: float = 3.0) ->
 
 
 @pytest.fixture
-def client(serve, room_scene: Path, tmp_path: Path):
-    daemon = serve(room_scene, f"lms=pty:{tmp_path / 'ttyLMS0'}")
+def client(serve, lms_room: Path, tmp_path: Path):
+    daemon = serve(lms_room, f"lms=pty:{tmp_path / 'ttyLMS0'}")
     ready = daemon.endpoint("lms", "pty")
     assert ready.device is not None and ready.device.startswith("/dev/pts/")
     with LmsSerialClient(ready.path, baud=9600) as lms:
@@ -41,7 +41,7 @@ def client(serve, room_scene: Path, tmp_path: Path):
         yield lms
 
 
-def test_sicktoolbox_session(client: LmsSerialClient, room_scene: Path) -> None:
+def test_sicktoolbox_session(client: LmsSerialClient, lms_room: Path) -> None:
     client.send(b"\x20\x40")  # at 9600: go to 38400
     ack, reply = first_events(client, 2)
     assert ack == ACK
@@ -63,7 +63,7 @@ def test_sicktoolbox_session(client: LmsSerialClient, room_scene: Path) -> None:
     scans = [event for event in client.events(1.5)
              if isinstance(event, Telegram) and event.command == 0xB0]
     assert len(scans) >= 3
-    _, expected = scan_values(room_scene, "lms", 1.0)
+    _, expected = scan_values(lms_room, "lms", 1.0)
     for scan in scans:
         count_word, values = scan.b0_values()
         assert count_word & 0x3FF == 361 and count_word & 0x3C00 == 0
