@@ -206,9 +206,3 @@ def test_a_file_that_is_not_utf8_is_rejected(tmp_path: Path) -> None:
     with pytest.raises(SceneError, match=r"^x\.toml: not UTF-8 text \(byte 16\)$"):
         load_scene(path)
 
-
-def test_every_message_is_one_line(tmp_path: Path) -> None:
-    for text, _ in CASES:
-        with pytest.raises(SceneError) as raised:
-            load_scene(write_scene(tmp_path, text))
-        assert "\n" not in str(raised.value)
