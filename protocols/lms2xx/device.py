@@ -70,6 +70,12 @@ class Mode(IntEnum):
     STREAM_PARTIAL = 0x2A
 
 
+STREAMING_MODES = frozenset(
+    {Mode.STREAM_ALL, Mode.STREAM_MEANS, Mode.STREAM_SUBRANGE, Mode.STREAM_MEAN_SUBRANGE, Mode.STREAM_PARTIAL}
+)
+MEAN_MODES = frozenset({Mode.STREAM_MEANS, Mode.STREAM_MEAN_SUBRANGE})
+
+
 class ScanValues(Protocol):
     values: np.ndarray
 
@@ -264,7 +270,7 @@ class Lms200Device:
         if self._mode is Mode.STREAM_PARTIAL:
             return self._partial_scan_body(index)
         if self._mode is Mode.STREAM_ALL:
-            return scan_body(self._scan(index), self._config.units, indices=self._indices(index))
+            return scan_body(self._scan(index), self._config.units, indices=self._next_indices(index))
         if self._mode is Mode.STREAM_MEANS:
             return self._mean_body(index, self._means)
         if self._mode is Mode.STREAM_SUBRANGE:
@@ -274,12 +280,12 @@ class Lms200Device:
     def _start_stream(self, mode: Mode, now: float) -> None:
         """Enter a mode; continuous ones start with the first scan completed after `now`."""
         self._mode = mode
-        if mode not in (Mode.STREAM_ALL, Mode.STREAM_MEANS, Mode.STREAM_SUBRANGE, Mode.STREAM_MEAN_SUBRANGE, Mode.STREAM_PARTIAL):
+        if mode not in STREAMING_MODES:
             self._stream = None
             return
         revolutions = 1 if mode is Mode.STREAM_PARTIAL else self._variant.revolutions
         first = latest_complete(now, revolutions) + 1
-        if mode in (Mode.STREAM_MEANS, Mode.STREAM_MEAN_SUBRANGE):
+        if mode in MEAN_MODES:
             first += self._means - 1  # the first window of n scans
         self._stream = _Stream(revolutions, first)
 
@@ -314,9 +320,9 @@ class Lms200Device:
             raise ValueError(f"scan source returned {values.shape} values, expected ({count},)")
         return values
 
-    def _indices(self, index: int, revolutions: int | None = None) -> Indices | None:
-        """Real-time indices (scan = revolution counter, telegram counter) when the
-        configuration asks for them; counts every measured-value telegram."""
+    def _next_indices(self, index: int, revolutions: int | None = None) -> Indices | None:
+        """Count one more measured-value telegram; its real-time indices (revolution
+        of scan `index`, telegram counter) when the configuration asks for them."""
         telegram = self._telegram_counter
         self._telegram_counter = (telegram + 1) % 256
         if not self._config.realtime_indices:
@@ -332,21 +338,21 @@ class Lms200Device:
             completion_time(revolution, 1), start_deg=start_deg, step_deg=1.0, count=count, unit=self._config.units
         )
         values = self._checked(scan.values, count)
-        return scan_body(values, self._config.units, partial_index=partial_index, indices=self._indices(revolution, 1))
+        return scan_body(values, self._config.units, partial_index=partial_index, indices=self._next_indices(revolution, 1))
 
     def _mean_body(self, last_index: int, scans: int) -> bytes:
         means = mean_of_scans(self._window(last_index, scans))
-        return mean_body(scans, means, self._config.units, indices=self._indices(last_index))
+        return mean_body(scans, means, self._config.units, indices=self._next_indices(last_index))
 
     def _subrange_body(self, index: int, first: int, last: int) -> bytes:
         last = min(last, self._variant.count)
         values = self._scan(index)[first - 1 : last]
-        return subrange_body(first, last, values, self._config.units, indices=self._indices(index))
+        return subrange_body(first, last, values, self._config.units, indices=self._next_indices(index))
 
     def _mean_subrange_body(self, last_index: int, scans: int, first: int, last: int) -> bytes:
         last = min(last, self._variant.count)
         means = mean_of_scans(self._window(last_index, scans)[:, first - 1 : last])
-        return mean_subrange_body(scans, first, last, means, self._config.units, indices=self._indices(last_index))
+        return mean_subrange_body(scans, first, last, means, self._config.units, indices=self._next_indices(last_index))
 
     def _valid_subrange(self, first: int, last: int) -> bool:
         return 1 <= first <= last <= self._variant.count
@@ -411,7 +417,7 @@ class Lms200Device:
             return _Reply((self._partial_scan_body(latest_complete(now, 1)),))
         index = latest_complete(now, self._variant.revolutions)
         values = self._scan(index)[:: {0x01: 1, 0x06: 2, 0x07: 20}[data[0]]]
-        return _Reply((scan_body(values, self._config.units, indices=self._indices(index)),))
+        return _Reply((scan_body(values, self._config.units, indices=self._next_indices(index)),))
 
     def _request_status(self, data: bytes, now: float) -> _Reply:
         """31 → B1: 152 bytes of live status."""
