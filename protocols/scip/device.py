@@ -214,7 +214,7 @@ class UrgDevice:
             return _reply(echo, b"00")
         if code == b"RS":
             self._power_on_settings()
-            self._protocol = "scip2"
+            self._protocol = "scip2"  # drivers send RS right after SCIP2.0 and expect to stay in 2.0
             self._epoch_ms = _milliseconds(now)
             return _reply(echo, b"00")
         if code == b"TM":

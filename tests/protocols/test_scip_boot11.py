@@ -76,3 +76,9 @@ def test_connection_lost_boots_back_into_scip_1_1(device):
 def test_overlong_line_gets_E_with_the_kept_part_echoed(device):
     [output] = device.receive(b"G" * 100 + b"\n", now=0.0)
     assert output.data == b"G" * 64 + b"\nE\n\n"
+
+
+def test_rs_after_the_switch_stays_in_scip2(device):
+    send(device, b"SCIP2.0")
+    assert send(device, b"RS") == b"RS\n00P\n\n"
+    assert send(device, b"VV").startswith(b"VV\n00P\n")
