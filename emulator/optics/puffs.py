@@ -27,7 +27,7 @@ import numpy as np
 from emulator.scene.plumes import Particles
 
 SIGMA_PER_EDGE = 1.0 / np.sqrt(2.0 * np.pi)
-REACH_SIGMAS = 4.0  # a puff farther than this from a beam adds < 4e-4 of its column
+REACH_SIGMAS = 3.0  # a puff farther than this from a beam adds < 1.2 % of its central column
 
 
 def erf(x: np.ndarray) -> np.ndarray:
@@ -41,8 +41,16 @@ def erf(x: np.ndarray) -> np.ndarray:
     return np.sign(x) * (1.0 - poly * np.exp(-x * x))
 
 
+_CDF_SATURATED = 5.0  # beyond ±5 sigma the CDF is 0 or 1 to within 3e-7
+
+
 def normal_cdf(x: np.ndarray) -> np.ndarray:
-    return 0.5 * (1.0 + erf(np.asarray(x) / np.sqrt(2.0)))
+    """Standard normal CDF; erf is evaluated only where the CDF is not saturated."""
+    x = np.asarray(x, dtype=float)
+    result = (x > 0).astype(float)
+    slope = np.flatnonzero(np.abs(x) < _CDF_SATURATED)
+    result.flat[slope] = 0.5 * (1.0 + erf(x.flat[slope] / np.sqrt(2.0)))
+    return result
 
 
 @dataclass(frozen=True)
@@ -111,23 +119,76 @@ class BeamPuffCrossings:
 def cross_beams(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray) -> BeamPuffCrossings:
     """The puffs each beam passes within REACH_SIGMAS of, before its end.
 
-    `directions` must be unit vectors. Distances come from matrix products
-    (beams x puffs), so the cost is a few array operations whatever the count.
+    `directions` must be unit vectors. A scanner's beams usually form a fan
+    (one origin, directions in one plane, ordered by angle): then each puff
+    picks its beams by angle with a binary search, so the cost grows with the
+    pairs that matter rather than with beams x puffs.
     """
     if len(puffs) == 0 or len(origins) == 0:
-        empty = np.zeros(0)
-        return BeamPuffCrossings(np.zeros(0, dtype=np.int64), empty, empty, empty, empty)
+        return _no_crossings()
     puffs = _near_segments(puffs, origins, directions, beam_end_m)
-    offsets = [puffs.centers[None, :, axis] - origins[:, axis, None] for axis in range(3)]
-    along = sum(offset * directions[:, axis, None] for axis, offset in enumerate(offsets))
-    miss_sq = np.maximum(sum(offset * offset for offset in offsets) - along * along, 0.0)
-    reach = REACH_SIGMAS * puffs.sigma[None, :]
-    near = (miss_sq < reach * reach) & (along > -reach) & (along < beam_end_m[:, None] + reach)
-    beam, puff = np.nonzero(near)
+    fan = _fan_pairs(puffs, origins, directions)
+    beam, puff = fan if fan is not None else _all_pairs(len(origins), len(puffs))
+    offset = puffs.centers[puff] - origins[beam]
+    along = np.einsum("ij,ij->i", offset, directions[beam])
+    miss_sq = np.maximum(np.einsum("ij,ij->i", offset, offset) - along * along, 0.0)
     sigma = puffs.sigma[puff]
-    along_m = along[beam, puff]
-    column = puffs.peak_density[puff] * np.sqrt(2.0 * np.pi) * sigma * np.exp(-miss_sq[beam, puff] / (2.0 * sigma * sigma))
-    return BeamPuffCrossings(beam, along_m, sigma, column, normal_cdf(-along_m / sigma))
+    reach = REACH_SIGMAS * sigma
+    near = (miss_sq < reach * reach) & (along > -reach) & (along < beam_end_m[beam] + reach)
+    beam, puff, along, miss_sq, sigma = beam[near], puff[near], along[near], miss_sq[near], sigma[near]
+    column = puffs.peak_density[puff] * np.sqrt(2.0 * np.pi) * sigma * np.exp(-miss_sq / (2.0 * sigma * sigma))
+    return BeamPuffCrossings(beam, along, sigma, column, normal_cdf(-along / sigma))
+
+
+def _no_crossings() -> BeamPuffCrossings:
+    empty = np.zeros(0)
+    return BeamPuffCrossings(np.zeros(0, dtype=np.int64), empty, empty, empty, empty)
+
+
+def _all_pairs(n_beams: int, n_puffs: int) -> tuple[np.ndarray, np.ndarray]:
+    beam, puff = np.meshgrid(np.arange(n_beams), np.arange(n_puffs), indexing="ij")
+    return beam.ravel(), puff.ravel()
+
+
+def _fan_pairs(puffs: Puffs, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Candidate (beam, puff) pairs of a fan of beams, or None if the beams are no fan."""
+    if len(origins) < 2 or np.ptp(origins, axis=0).max() > 0.0:
+        return None
+    first = directions[len(directions) // 2]
+    normal = np.cross(directions[0], directions[-1])
+    if np.linalg.norm(normal) < 1e-9:
+        normal = np.cross(directions[0], directions[1])
+    normal /= np.linalg.norm(normal)
+    second = np.cross(normal, first)
+    if np.abs(_dot(directions, normal)).max() > 1e-9:
+        return None
+    beam_angle = np.arctan2(_dot(directions, second), _dot(directions, first))
+    if np.all(np.diff(beam_angle) < 0):
+        second, beam_angle = -second, -beam_angle
+    if np.any(np.diff(beam_angle) <= 0):
+        return None
+    offset = puffs.centers - origins[0]
+    height = _dot(offset, normal)
+    x, y = _dot(offset, first), _dot(offset, second)
+    reach = REACH_SIGMAS * puffs.sigma
+    in_plane = np.sqrt(np.maximum(reach * reach - height * height, 0.0))
+    distance = np.hypot(x, y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        half_width = np.where(distance > in_plane, np.arcsin(np.clip(in_plane / distance, 0.0, 1.0)), np.pi)
+    centre = np.arctan2(y, x)
+    low = np.searchsorted(beam_angle, centre - half_width, side="left")
+    high = np.searchsorted(beam_angle, centre + half_width, side="right")
+    high = np.where(np.abs(height) < reach, high, low)
+    counts = high - low
+    puff = np.repeat(np.arange(len(puffs)), counts)
+    starts = np.repeat(low - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts)
+    beam = starts + np.arange(counts.sum())
+    return beam, puff
+
+
+def _dot(vectors: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """(N, 3) · (3,) without BLAS (whose threads cost more than this work on small arrays)."""
+    return vectors[:, 0] * axis[0] + vectors[:, 1] * axis[1] + vectors[:, 2] * axis[2]
 
 
 def _near_segments(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray) -> Puffs:

@@ -61,7 +61,8 @@ def beam_physics(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, params:
     crossings = cross_beams(Puffs.from_particles(beams.world.particles_at(beams.time_s)), beams.origins, beams.directions, beam_end)
     column = hits.region_optical_path + crossings.optical_path_to(beam_end)
     smoke_start, smoke_end = _smoke_extent(hits, crossings, beam_end)
-    smoke_distance = np.where(np.isfinite(smoke_start), 0.5 * (smoke_start + np.minimum(smoke_end, beam_end)), 1.0)
+    with np.errstate(invalid="ignore"):
+        smoke_distance = np.where(np.isfinite(smoke_start), 0.5 * (smoke_start + np.minimum(smoke_end, beam_end)), 1.0)
     factor = fluctuation_factor(scene.seed, beams.sensor.name, beams.angles_rad, beams.time_s, column, smoke_distance, params)
     surfaces = _surfaces(hits, beams, crossings, factor, receiver, params)
     far_end = np.where(surfaces.present.any(axis=1), np.where(surfaces.present, surfaces.range_m, 0.0).max(axis=1), beam_end)
@@ -94,7 +95,7 @@ def _region_path_to(hits: BeamHits, rows: np.ndarray, limits: np.ndarray) -> np.
 
 def _depth_edges(hits: BeamHits, params: PhysicalParams) -> np.ndarray:
     """Beams whose neighbour meets another object or a range differing by more than `edge_jump`."""
-    ranges = np.where(np.isfinite(hits.solid_range_m), hits.solid_range_m, -1.0)
+    ranges = np.where(np.isfinite(hits.solid_range_m), hits.solid_range_m, 0.0)
     objects = hits.object_index
     edge = np.zeros(len(ranges), dtype=bool)
     jump = (objects[1:] != objects[:-1]) | (np.abs(ranges[1:] - ranges[:-1]) > params.edge_jump * np.maximum(ranges[1:], ranges[:-1]))
@@ -188,10 +189,11 @@ def _smoke_echoes(
     rows = np.arange(n)
     region_path = _region_path_to(hits, rows, edges)
     puff_path = crossings.optical_path_to(edges)
-    region_step, puff_step = np.diff(region_path, axis=1), np.diff(puff_path, axis=1)
+    path = factor[:, None] * (region_path + puff_path)
     with np.errstate(divide="ignore", invalid="ignore"):
-        share = (params.region_backscatter * region_step + params.plume_backscatter * puff_step) / (region_step + puff_step)
-    share = np.nan_to_num(share)
-    transmission = np.exp(-2.0 * extinction * factor[:, None] * (region_path + puff_path))
+        local_extinction = np.nan_to_num(extinction * np.diff(path, axis=1) / np.diff(edges, axis=1))
+    multiple_scattering = 1.0 + (local_extinction / params.multiple_scattering_extinction) ** 3
+    share = receiver.volume_gain * params.backscatter_ratio * multiple_scattering
+    transmission = np.exp(-2.0 * extinction * path)
     mid = 0.5 * (edges[:, 1:] + edges[:, :-1])
     return SmokeEchoes(smoke_bin_echo(transmission, share, mid, receiver, params), mid, edges)

@@ -23,7 +23,10 @@ def range_law(range_m: np.ndarray, receiver: ReceiverOptics, params: PhysicalPar
 
     def raw(u: np.ndarray | float) -> np.ndarray:
         u = np.asarray(u, dtype=float)
-        return u * u / (u * u + receiver.overlap_m**2) ** 2
+        spreading = u * u / (u * u + receiver.overlap_m**2) ** 2
+        if receiver.gain_ramp_m > 0:
+            spreading = spreading * np.minimum(u / receiver.gain_ramp_m, 1.0) ** 2
+        return spreading
 
     return raw(range_m) / raw(params.reference_range_m)
 
@@ -147,29 +150,32 @@ def lms_first_echo(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The pulsed receiver: (range_m, from_smoke, clean) per beam; range inf = no echo.
 
-    The receiver integrates the echo energy since emission (smoke bins and
-    surfaces in range order) and stops at the first distance where it
-    reaches the threshold. The echo is clean when it rose from
-    `onset_fraction` of the threshold within `max_rise_m`.
+    The receiver integrates the echo energy over the last `window_m` of range
+    (smoke bins, and the surfaces met so far) and stops at the first distance
+    where it reaches the threshold. The echo is clean when `sharp_fraction`
+    of the threshold arrived within the last `max_rise_m`.
     """
     threshold = float(np.exp(log_threshold_value))
     cumulative = np.concatenate([np.zeros((len(smoke_amp), 1)), np.cumsum(smoke_amp, axis=1)], axis=1)
+
+    def smoke_window(points_m: np.ndarray) -> np.ndarray:
+        return _cumulative_at(cumulative, edges_m, points_m) - _cumulative_at(cumulative, edges_m, points_m - receiver.window_m)
+
+    smoke_at = _crossing_on_grid(smoke_window(edges_m), edges_m, threshold)
     order = np.argsort(np.where(target_amp > 0, target_range_m, np.inf), axis=1)
     ranges = np.take_along_axis(target_range_m, order, axis=1)
     amps = np.take_along_axis(target_amp, order, axis=1)
-    smoke_before_target = _cumulative_at(cumulative, edges_m, ranges)
-    energy_at_target = smoke_before_target + np.cumsum(amps, axis=1)
-
-    def first_target(level: float) -> np.ndarray:
-        reached = (energy_at_target >= level) & (amps > 0)
-        return np.where(reached.any(axis=1), ranges[np.arange(len(ranges)), np.argmax(reached, axis=1)], np.inf)
-
-    def first(level: float) -> tuple[np.ndarray, np.ndarray]:
-        smoke_at = _crossing_on_grid(cumulative, edges_m, level)
-        target_at = first_target(level)
-        return np.minimum(smoke_at, target_at), smoke_at < target_at
-
-    echo_m, from_smoke = first(threshold)
-    onset_m, _ = first(receiver.onset_fraction * threshold)
-    clean = (echo_m - onset_m) <= receiver.max_rise_m
+    energy_at_target = smoke_window(ranges) + np.cumsum(amps, axis=1)
+    reached = (energy_at_target >= threshold) & (amps > 0)
+    rows = np.arange(len(ranges))
+    first_target = np.argmax(reached, axis=1)
+    target_at = np.where(reached.any(axis=1), ranges[rows, first_target], np.inf)
+    from_smoke = smoke_at < target_at
+    echo_m = np.minimum(smoke_at, target_at)
+    energy_at_echo = np.where(from_smoke, threshold, energy_at_target[rows, first_target])
+    before = echo_m[:, None] - receiver.max_rise_m
+    with np.errstate(invalid="ignore"):
+        targets_before = np.where(ranges <= before, amps, 0.0).sum(axis=1)
+        gained = energy_at_echo - smoke_window(np.where(np.isfinite(before), before, 0.0))[:, 0] - targets_before
+    clean = gained >= receiver.sharp_fraction * threshold
     return echo_m, from_smoke, clean

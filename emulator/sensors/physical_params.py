@@ -26,21 +26,29 @@ class ReceiverOptics:
         clear air (datasheet).
     footprint_rad: full beam width in the scan plane, spanned by the sub-rays
         that make mixed pixels (assumption).
-    noise_*: clear-air range noise (datasheet, see `clear_air_sigma_m`).
+    volume_gain: the receiver's response to distributed (smoke) echoes
+        relative to surface echoes (assumption, calibrated: the URG-04LX
+        ignored fog backscatter up to its extinction at BOCAS, the LMS200
+        sees dense smoke as an obstacle).
+    gain_ramp_m: sensitivity time control: the receiver's gain grows as u^2
+        up to this range, flattening the 1/u^2 law of near echoes (0 = none;
+        assumption for the LMS200, whose first-echo range then falls as
+        1/density in homogeneous smoke, the paper's hypothesis 3).
     """
 
     overlap_m: float
     footprint_rad: float
     detection: str | tuple[float, float] = "reference"
+    volume_gain: float = 1.0
+    gain_ramp_m: float = 0.0
 
 
 @dataclass(frozen=True)
 class UrgReceiver(ReceiverOptics):
-    """AMCW phase receiver. modulation_hz sets how strongly returns at
-    different ranges decohere (assumption); below `min_coherence` the two
-    modulation waves disagree → error 8 (assumption); a blend whose smoke
-    share exceeds `max_smoke_share` while the target still counts is
-    ambiguous → error 8 as well (assumption)."""
+    """AMCW phase receiver. `modulation_hz` sets how strongly returns at
+    different ranges decohere (assumption); below `min_coherence` (|sum of
+    phasors| / sum of powers) the two modulation waves disagree → error 8
+    (assumption)."""
 
     modulation_hz: float = 20e6
     min_coherence: float = 0.9
@@ -48,14 +56,18 @@ class UrgReceiver(ReceiverOptics):
 
 @dataclass(frozen=True)
 class LmsReceiver(ReceiverOptics):
-    """Pulsed first-echo receiver integrating the echo energy since emission.
+    """Pulsed first-echo receiver integrating the echo energy over the last
+    `window_m` of range (its integration time × c/2).
 
-    A clean echo rises from `onset_fraction` of the threshold to the
-    threshold within `max_rise_m`; a slower (smeared) rise is rejected as
-    8187, signal-to-noise too small (assumptions)."""
+    An echo is clean when at least `sharp_fraction` of the threshold energy
+    arrived within the last `max_rise_m` before the trigger; a smeared
+    return (smoke building up slowly at a plume edge, or a weak target on a
+    smoke background) is rejected as 8187, signal-to-noise too small
+    (assumptions)."""
 
-    onset_fraction: float = 0.25
-    max_rise_m: float = 0.3
+    window_m: float = 3.0
+    sharp_fraction: float = 0.5
+    max_rise_m: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -72,9 +84,11 @@ class PhysicalParams:
     reference_range_m: float = 2.5
     penetration_power: float = 0.0028 * 2.5
     # smoke backscatter per unit extinction relative to a white Lambertian
-    # target (assumption, calibrated: see docs/physical-model.md §3)
-    region_backscatter: float = 2e-4
-    plume_backscatter: float = 0.3
+    # target, raised by multiple scattering in dense smoke as
+    # (1 + (sigma / multiple_scattering_extinction)^3) (assumptions,
+    # calibrated: see docs/physical-model.md)
+    backscatter_ratio: float = 1e-4
+    multiple_scattering_extinction: float = 1.5  # 1/m
     # correlated density fluctuations (assumption)
     fluctuation_bulk: float = 0.12
     fluctuation_edge: float = 0.9
@@ -82,12 +96,14 @@ class PhysicalParams:
     fluctuation_modes: int = 12
     fluctuation_time_s: float = 1.5
     # range bins along each beam's smoke
-    bins: int = 48
-    sub_rays: int = 4
+    bins: int = 32
+    sub_rays: int = 3
     edge_jump: float = 0.05  # neighbours' ranges differing by this fraction mark a depth edge
     urg: UrgReceiver = field(default_factory=lambda: UrgReceiver(overlap_m=0.3, footprint_rad=np.radians(0.36)))
     lms: LmsReceiver = field(
-        default_factory=lambda: LmsReceiver(overlap_m=0.1, footprint_rad=np.radians(0.25), detection=(0.1, 10.0))
+        default_factory=lambda: LmsReceiver(
+            overlap_m=0.05, footprint_rad=np.radians(0.25), detection=(0.1, 10.0), volume_gain=400.0, gain_ramp_m=2.5
+        )
     )
 
     def exact(self) -> PhysicalParams:
