@@ -67,16 +67,26 @@ class TelegramReader:
 
     Bytes outside a telegram that are neither ACK nor NAK are skipped; a frame
     with a bad CRC or an impossible length loses only its STX, and the search
-    restarts at the next byte (how a driver resynchronises after a torn telegram).
+    restarts at the next byte. A frame whose bytes stop for longer than
+    `stall_s` was cut short (a host command interrupts the device's output):
+    it too loses its STX, so the ACK and reply behind it are found.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, stall_s: float = 0.05) -> None:
         self._buffer = bytearray()
+        self._last_arrival = 0.0
+        self.stall_s = stall_s  # the device's bytes are at most 14 ms apart
         self.skipped_bytes = 0
         self.bad_frames = 0
+        self.torn_frames = 0
 
     def feed(self, data: bytes, now: float) -> Iterator[int | Telegram]:
-        """Yield ACK / NAK (as ints) and Telegrams completed by `data`."""
+        """Yield ACK / NAK (as ints) and Telegrams completed by `data` (b"" checks for a stall)."""
+        if data:
+            self._last_arrival = now
+        elif self._buffer and now - self._last_arrival > self.stall_s:
+            self.torn_frames += 1
+            del self._buffer[0]
         self._buffer += data
         while self._buffer:
             first = self._buffer[0]
@@ -154,8 +164,7 @@ class LmsSerialClient:
         yield from self.reader.feed(b"", time.monotonic())  # left over from an earlier call
         while time.monotonic() < deadline:
             data = self.port.read(max(1, self.port.in_waiting))
-            if data:
-                yield from self.reader.feed(data, time.monotonic())
+            yield from self.reader.feed(data, time.monotonic())
 
     def discard_input(self, quiet_s: float = 0.05) -> None:
         """Drop whatever arrives until the line has been quiet for `quiet_s`."""

@@ -54,7 +54,7 @@ def test_sicktoolbox_session(client: LmsSerialClient, lms_room: Path) -> None:
     assert acked and b"LMS200;30106" in kind.data
     acked, status = client.request(b"\x31")
     assert acked and len(status.data) == 152
-    assert int.from_bytes(status.data[115:117], "little") == 8019  # B1 baud word: 38400
+    assert int.from_bytes(status.data[115:117], "little") == 0x8019  # B1 baud word: 38400
     acked, config = client.request(b"\x74")
     assert acked and len(config.data) == 34
 

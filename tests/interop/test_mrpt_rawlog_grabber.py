@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from emulator.interop_bench import line_rate_limit
 from interop_support import require_program, scan_values, urg_step_values
 
 MRPT_HINT = "apt-get install mrpt-apps (.ci/run installs it)"
@@ -110,6 +111,9 @@ def test_csicklaserserial_over_pty(serve, lms_room: Path, tmp_path: Path, baud: 
     times, ranges, _ = exported_scans(tmp_path, "LMS", grab(tmp_path, section, scans=25, timeout_s=timeout_s))
     assert len(times) >= 20
     assert ranges.shape[1] == 361
+    # Stamped on arrival: the line (38400) or the mirror (500 k, 37.5/s at 0.5°) sets the pace.
+    rate = (len(times) - 1) / (times[-1] - times[0])
+    assert rate == pytest.approx(line_rate_limit(baud, 0.5), rel=0.1)
     _, expected_mm = scan_values(lms_room, "lms", 1.0)
     # cm mode (mm_mode = 0): each range within 1 cm of the scene's value.
     np.testing.assert_allclose(ranges, np.tile(expected_mm / 1000.0, (len(times), 1)), atol=0.0101)
