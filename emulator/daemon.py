@@ -1,0 +1,330 @@
+"""The daemon: every sensor of a scene served on its endpoints, on one asyncio loop.
+
+Per sensor: one scan source (the simulation, or anything sensor-like such as
+a replayed log) behind an LRU cache, so several endpoints of one sensor
+compute each scan once. Per endpoint: its own device session (protocol state
+machine) and transport. Each device is woken at its `next_deadline()`
+(simulated time, mapped to wall time through the clock's speed).
+
+Scans are computed on one "scan thread", ahead of time: a scan at simulated
+time t is a pure function of t, so as soon as a device names its next
+deadline the scan for it is started, and it is ready when the device asks.
+Computing on the loop thread at the deadline took 1–8 ms (railway), which
+showed up as scan-period jitter and command latency (docs/transports.md).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+from collections import OrderedDict
+from concurrent.futures import Executor, Future, ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping, Protocol, Sequence
+
+from emulator.clock import WallClock
+from emulator.errors import UserError
+from emulator.scene.model import Scene, SensorSpec
+from emulator.sensors.scan import Scan
+from emulator.transport import Address, PtyAddress, TcpAddress, parse_endpoint
+from emulator.transport.pty import PtyEndpoint
+from emulator.transport.tcp import TcpEndpoint
+from emulator.transport.timer import PreciseTimer
+from protocols.device import Device, Output
+
+SCAN_CACHE_SIZE = 32
+# Start a scan this long (wall) before its deadline: early enough to be ready,
+# late enough not to compete for the CPU with the previous scan's delivery
+# (on a pty the kernel forwards bytes on a worker thread that a busy CPU delays).
+PREFETCH_LEAD_S = 0.04  # recent scan requests per sensor; endpoints of one sensor share them
+
+# the SensorSpec options each protocol device takes (SCENE_FORMAT.md)
+DEVICE_OPTIONS: dict[str, tuple[str, ...]] = {
+    "urg-04lx": ("serial", "boot_protocol"),
+    "lms200": ("baud", "type_string", "angle_deg", "resolution_deg", "units", "firmware_profile"),
+}
+
+
+class Clock(Protocol):
+    def now(self) -> float: ...
+
+    def wall_delay(self, sim_seconds: float) -> float: ...
+
+
+class Cancellable(Protocol):
+    def cancel(self) -> None: ...
+
+
+class ScanSource(Protocol):
+    """What a device needs from a sensor: the scan for a request at a simulated time."""
+
+    def scan(self, time_s: float, **request: Any) -> Scan: ...
+
+
+SensorFactory = Callable[[SensorSpec], ScanSource]
+DeviceFactory = Callable[[SensorSpec, Callable[..., Scan], float], Device]
+
+
+class ScanCache:
+    """One sensor's scans for all its endpoints: each request computed once, on the
+    scan thread, and ahead of time where the next request can be foreseen (the
+    last request's window at the device's next deadline)."""
+
+    def __init__(self, sensor: ScanSource, executor: Executor, size: int = SCAN_CACHE_SIZE) -> None:
+        self._sensor = sensor
+        self._executor = executor
+        self._size = size
+        self._futures: OrderedDict[tuple, Future] = OrderedDict()
+        self._last_request: dict[str, Any] | None = None
+
+    def __call__(self, time_s: float, **request: Any) -> Scan:
+        """What a device calls: the scan for this request (computed now if not foreseen)."""
+        self._last_request = request
+        return self._future(time_s, request).result()
+
+    def prefetch(self, time_s: float) -> None:
+        """Start computing the scan the device will most likely ask for at `time_s`."""
+        if self._last_request is not None:
+            self._future(time_s, self._last_request)
+
+    def _future(self, time_s: float, request: dict[str, Any]) -> Future:
+        key = (time_s, *sorted(request.items()))
+        future = self._futures.get(key)
+        if future is None:
+            future = self._executor.submit(self._sensor.scan, time_s, **request)
+            self._futures[key] = future
+            if len(self._futures) > self._size:
+                self._futures.popitem(last=False)
+        else:
+            self._futures.move_to_end(key)
+        return future
+
+
+def simulated_sensors(scene: Scene) -> SensorFactory:
+    """Sensors computed from the scene, all sharing one optics world."""
+    from emulator.optics import World
+    from emulator.sensors import create_sensor
+
+    world = World(scene)
+    return lambda spec: create_sensor(scene, spec.name, world=world)
+
+
+def build_device(spec: SensorSpec, scans: Callable[..., Scan], start_time: float) -> Device:
+    """The protocol device for the sensor's model, configured from its scene options."""
+    if spec.model not in DEVICE_OPTIONS:
+        raise UserError(f"sensor {spec.name!r}: no protocol for model {spec.model!r}")
+    options = {key: spec.options[key] for key in DEVICE_OPTIONS[spec.model] if key in spec.options}
+    if spec.model == "urg-04lx":
+        from protocols.scip import UrgDevice
+
+        return UrgDevice(scans, start_time=start_time, **options)
+    from protocols.lms2xx import Lms200Device
+
+    return Lms200Device(scans, start_time=start_time, **options)
+
+
+@dataclass(frozen=True)
+class Ready:
+    """An endpoint that is serving; `line` is what `serve` prints."""
+
+    sensor: str
+    model: str
+    uri: str
+    slave: str | None = None  # a pty's /dev/pts/N
+
+    @property
+    def line(self) -> str:
+        text = f"ready {self.sensor} {self.model} {self.uri}"
+        return f"{text} -> {self.slave}" if self.slave else text
+
+
+class DeviceSession:
+    """One endpoint's device: client bytes in, outputs out, woken at its deadlines.
+
+    `prefetch(deadline)` starts the scan the device will want then; `call_later`
+    schedules the wake-up (default: the loop's own, millisecond-accurate timers).
+    """
+
+    def __init__(
+        self,
+        device: Device,
+        clock: Clock,
+        loop: asyncio.AbstractEventLoop,
+        prefetch: Callable[[float], None] | None = None,
+        call_later: Callable[..., Cancellable] | None = None,
+    ) -> None:
+        self.device = device
+        self.endpoint: PtyEndpoint | TcpEndpoint | None = None
+        self._clock = clock
+        self._prefetch = prefetch
+        self._call_later = call_later or loop.call_later
+        self._timer: Cancellable | None = None
+        self._prefetch_timer: Cancellable | None = None
+
+    @property
+    def baud(self) -> int | None:
+        return self.device.baud
+
+    def received(self, data: bytes) -> None:
+        self._deliver(self.device.receive(data, self._clock.now()))
+
+    def disconnected(self) -> None:
+        self.device.connection_lost()
+        self._schedule()
+
+    @property
+    def waiting(self) -> bool:
+        """A wake-up is scheduled for the device's next deadline."""
+        return self._timer is not None
+
+    def start(self) -> None:
+        self._schedule()
+
+    def stop(self) -> None:
+        for timer in (self._timer, self._prefetch_timer):
+            if timer is not None:
+                timer.cancel()
+        self._timer = self._prefetch_timer = None
+
+    def _wake(self) -> None:
+        self._timer = None
+        self._deliver(self.device.poll(self._clock.now()))
+
+    def _deliver(self, outputs: list[Output]) -> None:
+        if outputs and self.endpoint is not None:
+            self.endpoint.send(outputs)
+        self._schedule()
+
+    def _schedule(self) -> None:
+        self.stop()
+        deadline = self.device.next_deadline()
+        if deadline is not None:
+            delay = self._clock.wall_delay(deadline - self._clock.now())
+            self._timer = self._call_later(delay, self._wake)
+            if self._prefetch is not None:
+                lead = max(0.0, delay - PREFETCH_LEAD_S)
+                self._prefetch_timer = self._call_later(lead, self._prefetch, deadline)
+
+
+def _plan(
+    scene: Scene, endpoints_override: Mapping[str, Sequence[str]] | None
+) -> list[tuple[SensorSpec, tuple[Address, ...]]]:
+    """Each sensor with the endpoints it is served on; UserError for unknown sensors or bad URIs."""
+    overrides = dict(endpoints_override or {})
+    known = {spec.name for spec in scene.sensors}
+    for name in overrides:
+        if name not in known:
+            raise UserError(f"--endpoint: no sensor named {name!r} (known: {', '.join(sorted(known)) or 'none'})")
+    plan = []
+    owners: dict[Address, str] = {}
+    for spec in scene.sensors:
+        addresses = tuple(parse_endpoint(uri) for uri in overrides.get(spec.name, spec.endpoints))
+        for address in addresses:
+            identity = _identity(address)
+            if identity in owners:
+                raise UserError(f"endpoint {address} given twice (sensors {owners[identity]!r} and {spec.name!r})")
+            if not (isinstance(address, TcpAddress) and address.port == 0):  # 0: a fresh port each
+                owners[identity] = spec.name
+        if addresses:
+            plan.append((spec, addresses))
+    return plan
+
+
+def _identity(address: Address) -> Address:
+    """Two spellings of one pty path are the same endpoint."""
+    if isinstance(address, PtyAddress):
+        return PtyAddress(os.path.abspath(address.path))
+    return address
+
+
+class Daemon:
+    """Serves `scene`'s sensors. `endpoints_override` maps a sensor name to the
+    URIs that replace its scene endpoints; `sensor_factory` supplies scan sources
+    (default: the simulation); `device_factory` builds each endpoint's device."""
+
+    def __init__(
+        self,
+        scene: Scene,
+        endpoints_override: Mapping[str, Sequence[str]] | None = None,
+        clock: Clock | None = None,
+        *,
+        sensor_factory: SensorFactory | None = None,
+        device_factory: DeviceFactory = build_device,
+    ) -> None:
+        self.scene = scene
+        self.clock = clock or WallClock()
+        self.sessions: list[DeviceSession] = []
+        self.endpoints: list[PtyEndpoint | TcpEndpoint] = []
+        self._plan = _plan(scene, endpoints_override)
+        self._sensor_factory = sensor_factory
+        self._device_factory = device_factory
+        self._scan_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="scan")
+        self._timer: PreciseTimer | None = None
+        self._stopped: asyncio.Event | None = None
+
+    def start(self, loop: asyncio.AbstractEventLoop, on_ready: Callable[[Ready], None]) -> None:
+        """Open every endpoint, calling `on_ready` as each one serves."""
+        factory = self._sensor_factory or simulated_sensors(self.scene)
+        self._timer = PreciseTimer(loop)
+        start_time = self.clock.now()
+        for spec, addresses in self._plan:
+            scans = ScanCache(factory(spec), self._scan_thread)
+            for address in addresses:
+                device = self._device_factory(spec, scans, start_time)
+                session = DeviceSession(device, self.clock, loop, scans.prefetch, self._timer.call_later)
+                ready = self._open(spec, address, session, loop)
+                self.sessions.append(session)
+                session.start()
+                on_ready(ready)
+
+    def _open(
+        self, spec: SensorSpec, address: Address, session: DeviceSession, loop: asyncio.AbstractEventLoop
+    ) -> Ready:
+        if isinstance(address, PtyAddress):
+            endpoint: PtyEndpoint | TcpEndpoint = PtyEndpoint(address, session)
+            slave = endpoint.open(loop)
+            uri, detail = str(address), slave
+        else:
+            endpoint = TcpEndpoint(address, session)
+            uri, detail = str(endpoint.open(loop)), None
+        session.endpoint = endpoint
+        self.endpoints.append(endpoint)
+        return Ready(spec.name, spec.model, uri, detail)
+
+    async def run(self, on_ready: Callable[[Ready], None]) -> None:
+        """Serve until `stop()`; endpoints are closed (symlinks removed) on the way out."""
+        self._stopped = asyncio.Event()
+        try:
+            self.start(asyncio.get_running_loop(), on_ready)
+            await self._stopped.wait()
+        finally:
+            self.close()
+
+    def stop(self) -> None:
+        if self._stopped is not None:
+            self._stopped.set()
+
+    def close(self) -> None:
+        for session in self.sessions:
+            session.stop()
+        for endpoint in self.endpoints:
+            endpoint.close()
+        self.sessions.clear()
+        self.endpoints.clear()
+        self._scan_thread.shutdown(wait=False, cancel_futures=True)
+        if self._timer is not None:
+            self._timer.close()
+            self._timer = None
+
+    def stats(self) -> dict[str, int]:
+        """Counters for operators and leak tests (printed on SIGUSR1)."""
+        links = [endpoint.link for endpoint in self.endpoints if endpoint.link is not None]
+        return {
+            "endpoints": len(self.endpoints),
+            "clients": len(links),
+            "served": sum(endpoint.clients_served for endpoint in self.endpoints),
+            "dropped": sum(link.outbox.dropped for link in links),
+            "timers": sum(session.waiting for session in self.sessions),
+            "tasks": len(asyncio.all_tasks()),
+            "fds": len(os.listdir("/proc/self/fd")),
+        }
