@@ -37,6 +37,7 @@ CAST_RANGE_M = {"urg-04lx": 5.6, "lms200": 80.0}
 NO_RETURN_CODES = {"urg-04lx": (0,), "lms200": (8183, 8191)}
 URG_VALID_STEPS = slice(44, 726)  # the URG-04LX's measurable area, steps 44..725
 
+PNG_METADATA = {"Software": None}  # no version stamp: the same figure gives the same bytes
 ERROR_RGB = (0.86, 0.10, 0.10)
 NO_RETURN_RGB = (0.86, 0.92, 1.0)
 
@@ -52,8 +53,8 @@ class SensorSeries:
 
     `ranges_m` is NaN for every code; `no_return` marks codes meaning nothing in
     range; `errors` the other codes. `mean_density` is ∫density ds / beam length
-    averaged over the beams (d); `plume_share` the fraction of beams whose
-    first obstacle is a plume particle.
+    averaged over the beams (d); `plume_range_m` (n × m) the distance to the
+    first plume particle before the beam's solid hit (inf if none).
     """
 
     sensor: str
@@ -66,9 +67,19 @@ class SensorSeries:
     no_return: np.ndarray
     errors: np.ndarray
     mean_density: np.ndarray
-    plume_share: np.ndarray
+    plume_range_m: np.ndarray
     has_regions: bool
     has_plumes: bool
+
+    @property
+    def in_plume(self) -> np.ndarray:
+        """Beams whose first obstacle is a plume particle (n × m)."""
+        return np.isfinite(self.plume_range_m)
+
+    @property
+    def plume_share(self) -> np.ndarray:
+        """Fraction of the beams meeting a plume particle, per scan."""
+        return self.in_plume.mean(axis=1)
 
     @property
     def saturation(self) -> np.ndarray:
@@ -109,15 +120,15 @@ def sensor_series(scene: Scene, sensor_name: str, start_s: float, end_s: float) 
     no_return = np.isin(values, NO_RETURN_CODES[spec.model]) & is_code
     origins, directions = _beam_rays(scene, sensor_name, angles)
     mean_density = np.zeros(len(times))
-    plume_share = np.zeros(len(times))
+    plume_range = np.full(values.shape, np.inf)
     for i, time_s in enumerate(times):
         hits = world.cast(origins, directions, CAST_RANGE_M[spec.model], float(time_s))
         mean_density[i] = float(np.mean(hits.region_optical_path / hits.beam_end_m))
-        plume_share[i] = float(np.mean(np.isfinite(hits.plume_hit_range_m)))
+        plume_range[i] = hits.plume_hit_range_m
     return SensorSeries(
         sensor=spec.name, model=spec.model, unit=scans[0].unit, times_s=times, angles_rad=angles,
         values=values, ranges_m=ranges, no_return=no_return, errors=is_code & ~no_return,
-        mean_density=mean_density, plume_share=plume_share,
+        mean_density=mean_density, plume_range_m=plume_range,
         has_regions=bool(scene.regions), has_plumes=bool(scene.plumes),
     )
 
@@ -186,5 +197,5 @@ def draw_waterfall(series: SensorSeries, out: Path, *, width_px: int = 1200, hei
         plume_axes.tick_params(labelleft=False)
     if series.has_regions:
         figure.text(0.01, 0.005, SATURATION_NOTE, fontsize="x-small", color="dimgrey")
-    figure.savefig(out, dpi=dpi)
+    figure.savefig(out, dpi=dpi, metadata=PNG_METADATA)
     plt.close(figure)
