@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from emulator.lms_serial_client import BAUD_COMMANDS, LmsSerialClient, Telegram
-from emulator.serve_process import ServeProcess
+from emulator.serve_process import ServeProcess, private_endpoints
 
 MIRROR_HZ = 75.0
 BITS_PER_BYTE = 10  # 8N1: start bit, 8 data bits, stop bit
@@ -81,12 +81,14 @@ def lms_scan_rates(
 ) -> dict:
     """Scans/s per baud × resolution through `lrf-emulator serve` over a pty.
 
+    Every sensor of the scene is served on a pty in a temporary folder, so the
+    measurement never meets a user's daemon on the scene's own endpoints.
+
     Returns {"scene", "sensor", "duration_s", "rows": [{"baud", "resolution_deg",
     "telegram_bytes", "scans", "measured_per_s", "limit_per_s", "ratio"}, ...]}.
     """
     with tempfile.TemporaryDirectory(prefix="lrf-bench-") as folder:
-        link = Path(folder) / "ttyLMS0"
-        with ServeProcess(scene, [f"{sensor}=pty:{link}"]) as daemon:
+        with ServeProcess(scene, private_endpoints(scene, Path(folder))) as daemon:
             with LmsSerialClient(daemon.endpoint(sensor, "pty").path) as client:
                 client.find_device_baud()
                 rows = [

@@ -15,9 +15,12 @@ import subprocess
 import sys
 import threading
 import time
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+
+from emulator.scene import load_scene
 
 
 class ServeError(RuntimeError):
@@ -64,6 +67,11 @@ def free_tcp_port(host: str = "127.0.0.1") -> int:
         return probe.getsockname()[1]
 
 
+def private_endpoints(scene: str | Path, folder: Path) -> list[str]:
+    """`SENSOR=pty:FOLDER/SENSOR` for every sensor of the scene: nothing shared with a user's daemon."""
+    return [f"{sensor.name}=pty:{folder / sensor.name}" for sensor in load_scene(scene).sensors]
+
+
 def serve_command() -> list[str]:
     """The installed console script beside this interpreter, else `python -m emulator.cli`."""
     script = Path(sys.executable).with_name("lrf-emulator")
@@ -73,9 +81,10 @@ def serve_command() -> list[str]:
 class ServeProcess:
     """`lrf-emulator serve SCENE --endpoint SENSOR=URI ...`, running until `stop()`.
 
-    `endpoints` are `SENSOR=URI` strings; the constructor returns once one
-    ready line per endpoint has been printed, and raises ServeError (with the
-    daemon's stderr) if it exits or stays silent for `timeout_s`.
+    `endpoints` are `SENSOR=URI` strings; the constructor returns once each
+    sensor named there has printed one ready line per URI given for it, and
+    raises ServeError (with the daemon's stderr) if it exits or stays silent
+    for `timeout_s`. Sensors not named keep the scene's own endpoints.
     """
 
     def __init__(
@@ -105,7 +114,7 @@ class ServeProcess:
         for reader in self._readers:
             reader.start()
         try:
-            self._wait_ready(len(endpoints), timeout_s)
+            self._wait_ready(Counter(endpoint.split("=", 1)[0] for endpoint in endpoints), timeout_s)
         except BaseException:
             self.stop()
             raise
@@ -156,15 +165,16 @@ class ServeProcess:
         for line in self.process.stderr:
             self._stderr_chunks.append(line)
 
-    def _wait_ready(self, count: int, timeout_s: float) -> None:
+    def _wait_ready(self, expected: Counter[str], timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s
-        while len(self.ready) < count:
+        while expected - Counter(ready.sensor for ready in self.ready):
             remaining = deadline - time.monotonic()
             try:
                 line = self._stdout_lines.get(timeout=max(remaining, 0.0))
             except queue.Empty:
+                missing = expected - Counter(ready.sensor for ready in self.ready)
                 raise ServeError(
-                    f"{count - len(self.ready)} endpoint(s) not ready after {timeout_s} s: "
+                    f"not ready after {timeout_s} s: {dict(missing)}: "
                     f"{' '.join(self.args)}\n{self.stderr}"
                 ) from None
             if line is None:
