@@ -19,6 +19,7 @@ import numpy as np
 from emulator.errors import UserError
 from emulator.logfile import LogHeader, write_log
 from emulator.optics import World
+from emulator.sensors.physical import apply_model_override
 from emulator.scene import Scene, load_scene
 from emulator.scene.model import SensorSpec
 from emulator.sensors import create_sensor
@@ -33,6 +34,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sensor", required=True, metavar="NAME", help="the scene's sensor to record")
     parser.add_argument("--start", type=float, default=0.0, metavar="T0", help="first simulated time (s)")
     parser.add_argument("--end", type=float, required=True, metavar="T1", help="last simulated time (s)")
+    parser.add_argument(
+        "--model", metavar="PRESET", help="smoke/sensor response preset replacing the scene's (formsma2011 or physical)"
+    )
     parser.add_argument("--out", required=True, type=Path, metavar="FILE", help="log file to write")
 
 
@@ -79,7 +83,7 @@ def _sensor_spec(scene: Scene, sensor_name: str) -> SensorSpec:
 
 
 def run(args: argparse.Namespace) -> int:
-    scene = load_scene(args.scene)
+    scene = apply_model_override(load_scene(args.scene), args.model)
     spec = _sensor_spec(scene, args.sensor)
     times = scan_times(spec, args.start, args.end)
     scans = scan_series(scene, args.sensor, times)

@@ -110,12 +110,27 @@ def test_record_lms_uses_the_scenes_window_and_two_revolutions_per_half_degree_s
     assert np.array_equal(log.values[0], sensor.scan(k * 2 / 75).values)
 
 
+def test_record_model_override_changes_the_response(tmp_path: Path) -> None:
+    logs = {}
+    for model in ("formsma2011", "physical"):
+        out = tmp_path / f"{model}.log"
+        result = run_cli("record", "marulan", "--sensor", "lms", "--start", "80", "--end", "80.1",
+                         "--model", model, "--out", str(out))
+        assert result.returncode == 0, result.stderr
+        logs[model] = read_log(out).values
+    expected = [create_sensor(load_scene("marulan"), "lms").scan(k * 2 / 75).values for k in range(3000, 3004)]
+    assert np.array_equal(logs["formsma2011"], np.vstack(expected))
+    assert not np.array_equal(logs["physical"], logs["formsma2011"])
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
         (["record", "bocas", "--sensor", "nope", "--end", "1", "--out", "x.log"], "no sensor named 'nope'"),
         (["record", "bocas", "--sensor", "urg", "--start", "5", "--end", "1", "--out", "x.log"], "need 0 <= --start <= --end"),
         (["replay", "missing.log", "--model", "urg-04lx"], "no such log file"),
+        (["record", "bocas", "--sensor", "urg", "--end", "1", "--model", "bogus", "--out", "x.log"],
+         "unknown smoke model 'bogus'"),
     ],
 )
 def test_cli_errors_are_one_line_without_traceback(tmp_path: Path, args: list[str], message: str) -> None:
