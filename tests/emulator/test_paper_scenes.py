@@ -14,6 +14,7 @@ from emulator.scene import bundled_scenes, load_scene
 from emulator.scene.plumes import particles_at
 from emulator.sensors import create_sensor
 from emulator.serve_process import ServeProcess, free_tcp_port
+from emulator.validation import keyframe_crossings, machine_on_intervals
 
 PENETRATION_POWER = 0.007  # d·m, paper eq. 1
 TARGET_RANGE_M = 2.5
@@ -85,6 +86,14 @@ def test_bocas_error_onset_happens_when_and_where_the_model_predicts() -> None:
     assert 40 < onset_s < 120 and clearing_s - onset_s > 60  # a run of a few minutes
     assert saturation(fog.density.at(first_error)) == pytest.approx(0.14, abs=0.01)
     assert saturation(fog.density.at(first_error - 0.1)) > 0.14
+
+
+def test_bocas_fog_machine_runs_10_s_then_40_s_as_in_fig_5() -> None:
+    keyframes = load_scene("bocas").regions[0].density.keyframes
+    on = machine_on_intervals(keyframes)
+    assert [stop - start for start, stop in on] == [10.0, 40.0]
+    threshold = PENETRATION_POWER / TARGET_RANGE_M
+    assert keyframe_crossings(keyframes, threshold) == [t for t, _ in predicted_crossings(list(keyframes), threshold)]
 
 
 def test_marulan_layout_has_the_static_obstacles_of_fig_3_in_view() -> None:
