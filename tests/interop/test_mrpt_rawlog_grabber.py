@@ -20,24 +20,29 @@ import pytest
 from emulator.interop_bench import line_rate_limit
 from interop_support import require_program, scan_values, urg_step_values
 
+from emulator.serve_process import free_tcp_port
+
 MRPT_HINT = "apt-get install mrpt-apps (.ci/run installs it)"
 
 
-def grab(tmp_path: Path, section: str, scans: int, timeout_s: float) -> subprocess.CompletedProcess[str]:
+def grab(
+    folder: Path, section: str, scans: int, timeout_s: float, *, kill: bool = False
+) -> subprocess.CompletedProcess[str]:
     """Run rawlog-grabber with one sensor section until it has saved `scans` observations
-    (its "Saved N objects." lines) or `timeout_s` passed, then press a key."""
+    (its "Saved N objects." lines) or `timeout_s` passed, then press a key (or SIGKILL it)."""
     grabber = require_program("rawlog-grabber", MRPT_HINT)
-    config = tmp_path / "grab.ini"
+    folder.mkdir(exist_ok=True)
+    config = folder / "grab.ini"
     config.write_text(
         "[global]\n"
-        f"rawlog_prefix = {tmp_path / 'grab'}\n"
+        f"rawlog_prefix = {folder / 'grab'}\n"
         "time_between_launches = 100\n"
         "use_sensoryframes = 0\n"
         "GRABBER_PERIOD_MS = 100\n\n" + section
     )
     line_buffered = ["stdbuf", "-oL"] if shutil.which("stdbuf") else []  # its progress, as it happens
     process = subprocess.Popen(
-        [*line_buffered, grabber, str(config)], cwd=tmp_path, text=True,
+        [*line_buffered, grabber, str(config)], cwd=folder, text=True,
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
     )
     lines: list[str] = []
@@ -55,8 +60,11 @@ def grab(tmp_path: Path, section: str, scans: int, timeout_s: float) -> subproce
     reader = threading.Thread(target=follow, daemon=True)
     reader.start()
     enough.wait(timeout_s)
-    process.stdin.write("\n")  # os::kbhit(): stop, flush the log, exit 0
-    process.stdin.close()
+    if kill:  # a driver that dies mid-stream, leaving the device streaming
+        process.kill()
+    else:
+        process.stdin.write("\n")  # os::kbhit(): stop, flush the log, exit 0
+        process.stdin.close()
     try:
         process.wait(20)
     except subprocess.TimeoutExpired:
@@ -67,9 +75,9 @@ def grab(tmp_path: Path, section: str, scans: int, timeout_s: float) -> subproce
     return subprocess.CompletedProcess(process.args, process.returncode, "".join(lines), "")
 
 
-def exported_scans(tmp_path: Path, label: str, grabbed: subprocess.CompletedProcess[str]):
+def exported_scans(folder: Path, label: str, grabbed: subprocess.CompletedProcess[str]):
     """(times, ranges_m, valid) of the recorded scans, via rawlog-edit."""
-    logs = sorted(tmp_path.glob("grab_*.rawlog"))
+    logs = sorted(folder.glob("grab_*.rawlog"))
     assert grabbed.returncode == 0 and len(logs) == 1, grabbed.stdout[-3000:]
     editor = require_program("rawlog-edit", MRPT_HINT)
     # Run beside the log: rawlog-edit 2.5 joins an absolute input's folder and
@@ -84,12 +92,23 @@ def exported_scans(tmp_path: Path, label: str, grabbed: subprocess.CompletedProc
     return rows[:, 0], rows[:, 1:1 + count], rows[:, 1 + count:]
 
 
-def test_chokuyourg_over_pty(serve, urg_room: Path, tmp_path: Path) -> None:
-    daemon = serve(urg_room, f"urg=pty:{tmp_path / 'ttyURG0'}")
-    section = (
-        "[URG]\ndriver = CHokuyoURG\nprocess_rate = 90\nsensorLabel = URG\n"
-        f"COM_port_LIN = {daemon.endpoint('urg', 'pty').path}\n"
-    )
+def urg_section(link: str, port: int) -> str:
+    where = f"IP_DIR = 127.0.0.1\nPORT_DIR = {port}\n" if link == "tcp" else f"COM_port_LIN = {port}\n"
+    return "[URG]\ndriver = CHokuyoURG\nprocess_rate = 90\nsensorLabel = URG\n" + where
+
+
+def serve_urg(serve, scene: Path, folder: Path, link: str) -> str | int:
+    """The daemon with the URG on `link`; what rawlog-grabber connects to (pty path or port)."""
+    if link == "tcp":
+        port = free_tcp_port()
+        serve(scene, f"urg=tcp:127.0.0.1:{port}")
+        return port
+    return serve(scene, f"urg=pty:{folder / 'ttyURG0'}").endpoint("urg", "pty").path
+
+
+@pytest.mark.parametrize("link", ["pty", "tcp"])
+def test_chokuyourg(serve, urg_room: Path, tmp_path: Path, link: str) -> None:
+    section = urg_section(link, serve_urg(serve, urg_room, tmp_path, link))
     times, ranges, valid = exported_scans(tmp_path, "URG", grab(tmp_path, section, scans=25, timeout_s=20))
     assert len(times) >= 20
     assert ranges.shape[1] == 682
@@ -100,14 +119,25 @@ def test_chokuyourg_over_pty(serve, urg_room: Path, tmp_path: Path) -> None:
     np.testing.assert_array_equal(valid[0] == 1, expected >= 20)
 
 
+def test_chokuyourg_after_a_driver_killed_mid_stream(serve, urg_room: Path, tmp_path: Path) -> None:
+    section = urg_section("pty", serve_urg(serve, urg_room, tmp_path, "pty"))
+    killed = grab(tmp_path / "killed", section, scans=5, timeout_s=20, kill=True)
+    assert "Saved" in killed.stdout, killed.stdout[-3000:]
+    times, _, _ = exported_scans(tmp_path / "next", "URG", grab(tmp_path / "next", section, scans=25, timeout_s=20))
+    assert len(times) >= 20
+
+
+def lms_section(port: str, baud: int) -> str:
+    return (
+        "[LMS]\ndriver = CSickLaserSerial\nprocess_rate = 90\nsensorLabel = LMS\n"
+        f"COM_port_LIN = {port}\nCOM_baudRate = {baud}\nFOV = 180\nresolution = 50\nmm_mode = 0\n"
+    )
+
+
 @pytest.mark.parametrize(("baud", "timeout_s"), [(38400, 30.0), (500000, 20.0)])
 def test_csicklaserserial_over_pty(serve, lms_room: Path, tmp_path: Path, baud: int, timeout_s: float) -> None:
     daemon = serve(lms_room, f"lms=pty:{tmp_path / 'ttyLMS0'}")
-    section = (
-        "[LMS]\ndriver = CSickLaserSerial\nprocess_rate = 90\nsensorLabel = LMS\n"
-        f"COM_port_LIN = {daemon.endpoint('lms', 'pty').path}\n"
-        f"COM_baudRate = {baud}\nFOV = 180\nresolution = 50\nmm_mode = 0\n"
-    )
+    section = lms_section(daemon.endpoint("lms", "pty").path, baud)
     times, ranges, _ = exported_scans(tmp_path, "LMS", grab(tmp_path, section, scans=25, timeout_s=timeout_s))
     assert len(times) >= 20
     assert ranges.shape[1] == 361
@@ -117,3 +147,14 @@ def test_csicklaserserial_over_pty(serve, lms_room: Path, tmp_path: Path, baud: 
     _, expected_mm = scan_values(lms_room, "lms", 1.0)
     # cm mode (mm_mode = 0): each range within 1 cm of the scene's value.
     np.testing.assert_allclose(ranges, np.tile(expected_mm / 1000.0, (len(times), 1)), atol=0.0101)
+
+
+def test_csicklaserserial_after_a_driver_killed_mid_stream(serve, lms_room: Path, tmp_path: Path) -> None:
+    """The device keeps 38400 when its host dies; the next driver must find it there and move it."""
+    port = serve(lms_room, f"lms=pty:{tmp_path / 'ttyLMS0'}").endpoint("lms", "pty").path
+    killed = grab(tmp_path / "killed", lms_section(port, 38400), scans=5, timeout_s=30, kill=True)
+    assert "Saved" in killed.stdout, killed.stdout[-3000:]
+    folder = tmp_path / "next"
+    times, ranges, _ = exported_scans(folder, "LMS", grab(folder, lms_section(port, 500000), scans=25, timeout_s=40))
+    assert len(times) >= 20 and ranges.shape[1] == 361
+    assert (len(times) - 1) / (times[-1] - times[0]) == pytest.approx(37.5, rel=0.1)  # at 500 k
