@@ -2,7 +2,8 @@
 
 One client at a time. A second connection while one is open is refused: it
 is accepted and closed at once (the client sees end-of-stream), so a running
-client is never hijacked. There is no termios: output is paced at each
+client is never hijacked. A client that has already closed but whose
+end-of-stream is not yet read does not count (a restarting driver gets in). There is no termios: output is paced at each
 Output's baud, and baud commands are followed by the device logically.
 """
 
@@ -92,7 +93,7 @@ class TcpEndpoint:
             client, _ = self._listener.accept()
         except (BlockingIOError, InterruptedError, ConnectionAbortedError):
             return
-        if self._link is not None:
+        if self._link is not None and self._client_still_there():
             self.refused += 1
             client.close()
             return
@@ -111,6 +112,19 @@ class TcpEndpoint:
             on_lost=self._client_left,
             limit_bytes=self._limit_bytes,
         )
+
+    def _client_still_there(self) -> bool:
+        """Whether the current client is alive; if its end-of-stream is waiting unread
+        (a driver restarting reconnects at once), it is retired here first."""
+        try:
+            alive = self._client.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) != b""
+        except BlockingIOError:
+            alive = True
+        except OSError:
+            alive = False
+        if not alive:
+            self._client_left()
+        return alive
 
     def _client_left(self) -> None:
         self._drop_client()
