@@ -29,8 +29,8 @@ from emulator.errors import UserError
 from emulator.optics import BeamHits
 from emulator.scene.model import Scene
 from emulator.sensors import lms200, urg04lx
-from emulator.sensors.physical_beams import beam_physics
-from emulator.sensors.physical_echo import lms_first_echo, log_threshold, urg_decision
+from emulator.sensors.physical_beams import SmokeEchoes, beam_physics
+from emulator.sensors.physical_echo import lms_first_echo, log_threshold, smoke_return, urg_decision
 from emulator.sensors.physical_noise import lms_range_error_m, scan_rng, urg_range_noise_m
 from emulator.sensors.physical_params import DEFAULT_PARAMS, PhysicalParams
 from emulator.sensors.response import PRESET_MODULES, Beams
@@ -53,9 +53,8 @@ def urg_values(hits: BeamHits, beams: Beams, params: PhysicalParams = DEFAULT_PA
     physics = beam_physics(hits, beams, receiver, params)
     surfaces, smoke = physics.surfaces, physics.smoke
     threshold = log_threshold(receiver, params, beams.scene.density_to_extinction)
-    detected, coherent, range_m = urg_decision(
-        surfaces.log_echo, surfaces.amp, surfaces.range_m, smoke.amp, smoke.mid_m, threshold, receiver
-    )
+    smoke_echo = smoke_return(smoke.rows, smoke.amp, smoke.mid_m, len(hits), receiver)
+    detected, coherent, range_m = urg_decision(surfaces.log_echo, surfaces.amp, surfaces.range_m, smoke_echo, threshold, receiver)
     if params.noise:
         range_m = range_m + urg_range_noise_m(scan_rng(beams.scene.seed, beams.sensor.name, beams.time_s), range_m)
     millimetres = np.rint(np.where(detected, range_m, 0.0) * 1000.0).astype(np.int64)
@@ -72,7 +71,7 @@ def lms_values(hits: BeamHits, beams: Beams, unit: str, params: PhysicalParams =
     physics = beam_physics(hits, beams, receiver, params)
     surfaces, smoke = physics.surfaces, physics.smoke
     threshold = log_threshold(receiver, params, beams.scene.density_to_extinction)
-    echo_m, _, clean = lms_first_echo(surfaces.amp, surfaces.range_m, smoke.amp, smoke.edges_m, threshold, receiver)
+    echo_m, clean = _lms_echo(surfaces.amp, surfaces.range_m, smoke, threshold, params)
     seen = np.isfinite(echo_m)
     if params.noise:
         rng = scan_rng(beams.scene.seed, beams.sensor.name, beams.time_s)
@@ -81,3 +80,18 @@ def lms_values(hits: BeamHits, beams: Beams, unit: str, params: PhysicalParams =
     values = np.where(counts >= lms200.ABOVE_MAXIMUM, lms200.ABOVE_MAXIMUM, counts)
     values = np.where(clean, values, LMS_SIGNAL_TO_NOISE)
     return np.where(seen, values, lms200.NO_ECHO)
+
+
+def _lms_echo(
+    target_amp: np.ndarray, target_range_m: np.ndarray, smoke: SmokeEchoes, threshold: float, params: PhysicalParams
+) -> tuple[np.ndarray, np.ndarray]:
+    """First echo of every beam: beams without smoke need no range grid."""
+    echo_m, clean = np.full(len(target_amp), np.inf), np.ones(len(target_amp), dtype=bool)
+    clear = np.ones(len(target_amp), dtype=bool)
+    clear[smoke.rows] = False
+    for rows, amp, edges in (
+        (smoke.rows, smoke.amp, smoke.edges_m),
+        (np.flatnonzero(clear), np.zeros((int(clear.sum()), 1)), np.zeros((int(clear.sum()), 2))),
+    ):
+        echo_m[rows], _, clean[rows] = lms_first_echo(target_amp[rows], target_range_m[rows], amp, edges, threshold, params.lms)
+    return echo_m, clean

@@ -40,8 +40,10 @@ class Surfaces:
 
 @dataclass(frozen=True)
 class SmokeEchoes:
-    """Smoke backscatter per range bin: power (N, M), bin centres (N, M), bin edges (N, M+1)."""
+    """Smoke backscatter per range bin for the R beams `rows` that meet smoke:
+    power (R, M), bin centres (R, M), bin edges (R, M+1)."""
 
+    rows: np.ndarray
     amp: np.ndarray
     mid_m: np.ndarray
     edges_m: np.ndarray
@@ -178,22 +180,14 @@ def _smoke_echoes(
     receiver: ReceiverOptics,
     params: PhysicalParams,
 ) -> SmokeEchoes:
-    n = len(hits)
-    has_smoke = np.isfinite(start) & (end > start)
-    if not params.backscatter or not has_smoke.any():
-        zeros = np.zeros((n, 1))
-        return SmokeEchoes(zeros, zeros, np.zeros((n, 2)))
-    low = np.where(has_smoke, start, 0.0)
-    high = np.where(has_smoke, end, 0.0)
+    rows = np.flatnonzero(np.isfinite(start) & (end > start)) if params.backscatter else np.zeros(0, dtype=np.int64)
+    low, high = start[rows], end[rows]
     edges = low[:, None] + (high - low)[:, None] * np.linspace(0.0, 1.0, params.bins + 1)
-    rows = np.arange(n)
-    region_path = _region_path_to(hits, rows, edges)
-    puff_path = crossings.optical_path_to(edges)
-    path = factor[:, None] * (region_path + puff_path)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        local_extinction = np.nan_to_num(extinction * np.diff(path, axis=1) / np.diff(edges, axis=1))
+    path = factor[rows, None] * (_region_path_to(hits, rows, edges) + crossings.optical_path_to(edges, rows))
+    width = np.diff(edges, axis=1)
+    local_extinction = extinction * np.diff(path, axis=1) / np.where(width > 0, width, 1.0)
     multiple_scattering = 1.0 + (local_extinction / params.multiple_scattering_extinction) ** 3
     share = receiver.volume_gain * params.backscatter_ratio * multiple_scattering
     transmission = np.exp(-2.0 * extinction * path)
     mid = 0.5 * (edges[:, 1:] + edges[:, :-1])
-    return SmokeEchoes(smoke_bin_echo(transmission, share, mid, receiver, params), mid, edges)
+    return SmokeEchoes(rows, smoke_bin_echo(transmission, share, mid, receiver, params), mid, edges)

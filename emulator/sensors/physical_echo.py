@@ -13,6 +13,8 @@ in the extinction: beta/2 · (exp(-2k OP_a) - exp(-2k OP_b)) · G(mid).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from emulator.sensors.physical_params import SPEED_OF_LIGHT_M_S, LmsReceiver, PhysicalParams, ReceiverOptics, UrgReceiver
@@ -77,12 +79,34 @@ def smoke_bin_echo(
     return 0.5 * backscatter_share * extinguished * range_law(mid_m, receiver, params)
 
 
+@dataclass(frozen=True)
+class SmokeReturn:
+    """Per beam (N,): the smoke's total echo power, its power-weighted range sum and its phasor."""
+
+    power: np.ndarray
+    range_moment: np.ndarray
+    phasor: np.ndarray
+
+
+def modulation_wavenumber(receiver: UrgReceiver) -> float:
+    """Phase per metre of range (out and back) at the modulation frequency."""
+    return 4.0 * np.pi * receiver.modulation_hz / SPEED_OF_LIGHT_M_S
+
+
+def smoke_return(rows: np.ndarray, amp: np.ndarray, mid_m: np.ndarray, n_beams: int, receiver: UrgReceiver) -> SmokeReturn:
+    """Sum the smoke bins of `rows` as the AMCW receiver sees them."""
+    power, moment, phasor = np.zeros(n_beams), np.zeros(n_beams), np.zeros(n_beams, dtype=complex)
+    power[rows] = amp.sum(axis=1)
+    moment[rows] = (amp * mid_m).sum(axis=1)
+    phasor[rows] = (amp * np.exp(1j * modulation_wavenumber(receiver) * mid_m)).sum(axis=1)
+    return SmokeReturn(power, moment, phasor)
+
+
 def urg_decision(
     log_target: np.ndarray,
     target_amp: np.ndarray,
     target_range_m: np.ndarray,
-    smoke_amp: np.ndarray,
-    smoke_range_m: np.ndarray,
+    smoke: SmokeReturn,
     log_threshold_value: float,
     receiver: UrgReceiver,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -93,21 +117,17 @@ def urg_decision(
     smoke pulls it toward the sensor. `log_target` is ln of the surfaces'
     summed echo, compared in the log domain so that with no smoke return the
     decision is exactly 'two-way optical depth within the budget'.
-    Returns are (N, S) for surfaces (S sub-rays) and (N, M) for smoke bins.
+    Surfaces are (N, S) arrays (S sub-rays).
     """
-    smoke_total = smoke_amp.sum(axis=1)
     target_total = target_amp.sum(axis=1)
-    total = target_total + smoke_total
-    detected = (log_target >= log_threshold_value) | ((smoke_total > 0) & (total >= np.exp(log_threshold_value)))
-    wavenumber = 4.0 * np.pi * receiver.modulation_hz / SPEED_OF_LIGHT_M_S
+    total = target_total + smoke.power
+    detected = (log_target >= log_threshold_value) | ((smoke.power > 0) & (total >= np.exp(log_threshold_value)))
     target_range = np.where(target_amp > 0, target_range_m, 0.0)
-    phasor = (target_amp * np.exp(1j * wavenumber * target_range)).sum(axis=1) + (
-        smoke_amp * np.exp(1j * wavenumber * smoke_range_m)
-    ).sum(axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        coherence = np.where(total > 0, np.abs(phasor) / total, 1.0)
-        mean_range = ((target_amp * target_range).sum(axis=1) + (smoke_amp * smoke_range_m).sum(axis=1)) / total
-    single_target = (smoke_total == 0) & (np.count_nonzero(target_amp, axis=1) <= 1)
+    phasor = (target_amp * np.exp(1j * modulation_wavenumber(receiver) * target_range)).sum(axis=1) + smoke.phasor
+    positive = np.where(total > 0, total, 1.0)
+    coherence = np.where(total > 0, np.abs(phasor) / positive, 1.0)
+    mean_range = ((target_amp * target_range).sum(axis=1) + smoke.range_moment) / positive
+    single_target = (smoke.power == 0) & (np.count_nonzero(target_amp, axis=1) <= 1)
     mean_range = np.where(single_target, target_range.max(axis=1), mean_range)  # exact, no rounding through the mean
     coherent = single_target | (coherence >= receiver.min_coherence)
     return detected, coherent, mean_range

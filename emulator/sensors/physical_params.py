@@ -96,7 +96,7 @@ class PhysicalParams:
     fluctuation_modes: int = 12
     fluctuation_time_s: float = 1.5
     # range bins along each beam's smoke
-    bins: int = 32
+    bins: int = 16
     sub_rays: int = 3
     edge_jump: float = 0.05  # neighbours' ranges differing by this fraction mark a depth edge
     urg: UrgReceiver = field(default_factory=lambda: UrgReceiver(overlap_m=0.3, footprint_rad=np.radians(0.36)))
