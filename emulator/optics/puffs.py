@@ -114,7 +114,7 @@ class BeamPuffCrossings:
             beam = beam[pairs]
         finite = np.where(np.isfinite(per_beam), per_beam, 1e12)
         share = normal_cdf((finite[beam] - self.along_m[pairs, None]) / self.sigma[pairs, None])
-        contribution = self.column[pairs, None] * np.maximum(share - self.before_origin[pairs, None], 0.0)
+        contribution = self.column[pairs, None] * (share - self.before_origin[pairs, None])  # limits >= 0: share >= before
         columns = per_beam.shape[1]
         flat_index = (beam[:, None] * columns + np.arange(columns)).ravel()
         totals = np.bincount(flat_index, weights=contribution.ravel(), minlength=per_beam.size)

@@ -144,9 +144,10 @@ def _surfaces(
     puff_path = crossings.optical_path_to(np.where(present, ranges, 0.0))
     optical_path = factor[:, None] * (region_path + puff_path)
     angle_exponent, stretch, patchiness = _material_arrays(beams, objects, params)
-    if params.material_effects and np.any(patchiness):
-        points = beams.origins[:, None, :] + beams.directions[:, None, :] * np.where(present, ranges, 0.0)[:, :, None]
-        reflectivity = reflectivity * np.exp(patchiness * patch_values(points.reshape(-1, 3), beams.scene.seed).reshape(n, sub_rays))
+    patchy = np.nonzero(present & (patchiness > 0))
+    if len(patchy[0]):
+        points = beams.origins[patchy[0]] + beams.directions[patchy[0]] * ranges[patchy][:, None]
+        reflectivity[patchy] *= np.exp(patchiness[patchy] * patch_values(points, beams.scene.seed))
     extinction = beams.scene.density_to_extinction
     cos_factor = cosine**angle_exponent
     log_each = log_target_echo(reflectivity, cos_factor, ranges, optical_path, extinction, receiver, params)
