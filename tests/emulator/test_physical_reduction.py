@@ -83,3 +83,15 @@ def test_scene_model_physical_is_served_by_the_sensors():
     np.testing.assert_array_equal(scan.values[44:726], physical.urg_values(hits, beams))
     lms_scan = create_sensor(scene, "lms", world).scan(1.0)
     assert lms_scan.values.shape == (361,) and abs(lms_scan.values[180] - 2500) < 60
+
+
+@settings(max_examples=30, deadline=None)
+@given(share=st.floats(0.0, 0.999))
+def test_with_backscatter_on_the_reference_still_ranges_within_the_budget(share):
+    """Noise and fluctuation off, smoke echo on: below 0.007 d·m the outcome class is formsma2011's (a range)."""
+    params = dataclasses.replace(DEFAULT_PARAMS, noise=False, fluctuation=False)
+    scene = reference_scene(objects=(panel("reference", 2.5, "white_paper"),), regions=(room(share * 0.007 / 2.5),))
+    hits, beams = cast_beams(scene, "urg", np.array([0.0]), 0.0)
+    value = physical.urg_values(hits, beams, params)[0]
+    assert formsma2011.urg_values(hits, beams)[0] == 2500
+    assert 2500 - 40 <= value <= 2500  # pulled toward the sensor by the smoke's own echo, never pushed away
