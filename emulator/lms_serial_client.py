@@ -13,6 +13,7 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+import numpy as np
 import serial
 
 STX = 0x02
@@ -54,12 +55,11 @@ class Telegram:
     raw: bytes
     arrived: float
 
-    def b0_values(self) -> tuple[int, list[int]]:
-        """(count word, values) of a B0 measured-values telegram."""
+    def b0_values(self) -> tuple[int, np.ndarray]:
+        """(count word, value words with their flag bits) of a B0 measured-values telegram."""
         count_word = int.from_bytes(self.data[0:2], "little")
         count = count_word & 0x3FF
-        words = self.data[2:2 + 2 * count]
-        return count_word, [int.from_bytes(words[i:i + 2], "little") for i in range(0, len(words), 2)]
+        return count_word, np.frombuffer(self.data, dtype="<u2", count=count, offset=2).astype(np.int64)
 
 
 class TelegramReader:

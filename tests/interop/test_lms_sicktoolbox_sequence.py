@@ -69,7 +69,7 @@ def test_sicktoolbox_session(client: LmsSerialClient, lms_room: Path) -> None:
         assert count_word & 0x3FF == 361 and count_word & 0x3C00 == 0
         assert count_word >> 14 == 0b01  # mm
         assert scan.status == 0x10
-        np.testing.assert_array_equal(np.array(values) & 0x1FFF, expected)
+        np.testing.assert_array_equal(values & 0x1FFF, expected)
     assert client.reader.bad_frames == 0
 
 
