@@ -21,7 +21,7 @@ from emulator.sensors.physical_params import SPEED_OF_LIGHT_M_S, LmsReceiver, Ph
 
 
 def range_law(range_m: np.ndarray, receiver: ReceiverOptics, params: PhysicalParams) -> np.ndarray:
-    """G(u): inverse-square spreading times the transmitter/receiver overlap, 1 at the reference range."""
+    """G(u): inverse-square spreading × transmitter/receiver overlap × gain ramp, 1 at the reference range."""
 
     def raw(u: np.ndarray | float) -> np.ndarray:
         u = np.asarray(u, dtype=float)

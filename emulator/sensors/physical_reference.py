@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from emulator.optics import BeamHits
+from emulator.optics import BeamHits, World
 from emulator.scene.materials import BUILTIN_MATERIALS
 from emulator.scene.model import Box, Density, Material, Plume, Pose, Scene, SceneObject, SensorSpec, SmokeRegion
 from emulator.sensors import lms200, urg04lx
 from emulator.sensors.beam_geometry import scan_plane_rays
 from emulator.sensors.response import Beams
-from emulator.optics import World
 
 SENSOR_HEIGHT_M = 0.3
 URG_FRONT = urg04lx.FRONT_STEP - urg04lx.FIRST_VALID_STEP  # index of the straight-ahead beam among the valid ones
