@@ -36,7 +36,7 @@ SCAN_CACHE_SIZE = 32
 # Start a scan this long (wall) before its deadline: early enough to be ready,
 # late enough not to compete for the CPU with the previous scan's delivery
 # (on a pty the kernel forwards bytes on a worker thread that a busy CPU delays).
-PREFETCH_LEAD_S = 0.04  # recent scan requests per sensor; endpoints of one sensor share them
+PREFETCH_LEAD_S = 0.07  # recent scan requests per sensor; endpoints of one sensor share them
 
 # the SensorSpec options each protocol device takes (SCENE_FORMAT.md)
 DEVICE_OPTIONS: dict[str, tuple[str, ...]] = {
