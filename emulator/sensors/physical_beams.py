@@ -9,11 +9,12 @@ footprint meets (sub-rays at depth edges), each with its optical path.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.optics import BeamHits
+from emulator.optics import BeamHits, World
 from emulator.optics.puffs import BeamPuffCrossings, Puffs, cross_beams
 from emulator.scene.material_optics import optics_for, patch_values
 from emulator.sensors.beam_geometry import scan_plane_rays
@@ -131,13 +132,9 @@ def _surfaces(
     edge_rows = np.flatnonzero(_depth_edges(hits, params)) if sub_rays > 1 else np.zeros(0, dtype=np.int64)
     if len(edge_rows):
         offsets = ((np.arange(sub_rays) + 0.5) / sub_rays - 0.5) * receiver.footprint_rad
-        angles = (beams.angles_rad[edge_rows][:, None] + offsets).ravel()
-        origins, directions = scan_plane_rays(beams.sensor.pose, angles)
-        sub_hits = beams.world.cast(origins, directions, hits.max_range_m, beams.time_s)
-        ranges[edge_rows] = sub_hits.solid_range_m.reshape(-1, sub_rays)
-        objects[edge_rows] = sub_hits.object_index.reshape(-1, sub_rays)
-        reflectivity[edge_rows] = sub_hits.reflectivity.reshape(-1, sub_rays)
-        cosine[edge_rows] = sub_hits.cos_incidence.reshape(-1, sub_rays)
+        angles = beams.angles_rad[edge_rows][:, None] + offsets
+        solids = _sub_ray_solids(beams, angles, hits.max_range_m)
+        ranges[edge_rows], objects[edge_rows], reflectivity[edge_rows], cosine[edge_rows] = solids
         region_path[edge_rows] = _region_path_to(hits, edge_rows, np.minimum(ranges[edge_rows], hits.max_range_m))
         used[edge_rows] = True
     present = used & np.isfinite(ranges)
@@ -159,6 +156,34 @@ def _surfaces(
         log_echo = np.where(single, log_each[:, 0], np.log(amp.sum(axis=1)))
     apparent = ranges * (1.0 + stretch * 2.0 * extinction * optical_path)
     return Surfaces(log_echo, amp, np.where(present, apparent, np.inf), present)
+
+
+_SubRaySolids = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+_SUB_RAY_CACHE: weakref.WeakKeyDictionary[World, dict[tuple, _SubRaySolids]] = weakref.WeakKeyDictionary()
+_SUB_RAY_CACHE_SIZE = 64
+
+
+def _sub_ray_solids(beams: Beams, angles_rad: np.ndarray, max_range_m: float) -> _SubRaySolids:
+    """Range, object, reflectivity and |cos incidence| (R, S) of sub-rays at sensor-frame `angles_rad` (R, S).
+
+    Solid objects never move, so the result depends only on the world, the
+    sensor's pose and the angles: it is cast once and kept per world.
+    """
+    cache = _SUB_RAY_CACHE.setdefault(beams.world, {})
+    key = (beams.sensor.pose, angles_rad.tobytes(), angles_rad.shape, max_range_m)
+    if key not in cache:
+        origins, directions = scan_plane_rays(beams.sensor.pose, angles_rad.ravel())
+        hits = beams.world.cast(origins, directions, max_range_m, beams.time_s)
+        shape = angles_rad.shape
+        if len(cache) >= _SUB_RAY_CACHE_SIZE:
+            cache.clear()
+        cache[key] = (
+            hits.solid_range_m.reshape(shape),
+            hits.object_index.reshape(shape),
+            hits.reflectivity.reshape(shape),
+            hits.cos_incidence.reshape(shape),
+        )
+    return cache[key]
 
 
 def _material_arrays(beams: Beams, objects: np.ndarray, params: PhysicalParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
