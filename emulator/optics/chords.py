@@ -44,7 +44,7 @@ def _slab(
     for axis in range(origins.shape[-1]):
         o, d = origins[..., axis], directions[..., axis]
         low, high = lower[..., axis], upper[..., axis]
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # d may be 0 or subnormal
             inverse = 1.0 / d
             t_lower = (low - o) * inverse
             t_upper = (high - o) * inverse

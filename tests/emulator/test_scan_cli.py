@@ -1,0 +1,123 @@
+"""`lrf-emulator scan` through the real command line (CLI.md)."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+SCENE = """
+[scene]
+name = "scan test"
+seed = 3
+
+[[objects]]
+name = "wall"
+box = { size = [0.2, 20.0, 3.0] }
+position = [3.1, 0.0, 0.5]
+
+[[smoke.regions]]
+name = "fog"
+box = { size = [2.0, 20.0, 3.0] }
+position = [1.5, 0.0, 0.5]
+density = { keyframes = [[0.0, 0.0], [10.0, 0.008]] }
+
+[[smoke.plumes]]
+name = "fire"
+source = [2.0, -2.0, 0.0]
+rate = 20.0
+lifetime = 10.0
+size = 0.3
+velocity = [0.0, 0.3, 0.0]
+spread = 0.3
+density = 0.05
+
+[[sensors]]
+name = "urg"
+model = "urg-04lx"
+position = [0.0, 0.0, 0.5]
+endpoints = ["tcp:127.0.0.1:10940"]
+
+[[sensors]]
+name = "lms"
+model = "lms200"
+position = [0.0, 0.0, 0.5]
+endpoints = ["pty:ttyLMS0"]
+angle_deg = 100
+resolution_deg = 1
+units = "cm"
+"""
+
+
+@pytest.fixture
+def scene_file(tmp_path: Path) -> Path:
+    path = tmp_path / "scan_test.toml"
+    path.write_text(SCENE)
+    return path
+
+
+def lrf(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "emulator.cli", *args], capture_output=True, text=True, timeout=60)
+
+
+def scan(*args: str) -> dict:
+    result = lrf("scan", *args)
+    assert result.returncode == 0, result.stderr
+    return json.loads(result.stdout)
+
+
+def test_urg_scan_json(scene_file):
+    out = scan(str(scene_file), "--sensor", "urg", "--time", "1")
+    assert set(out) == {"sensor", "model", "time_s", "unit", "angles_deg", "values", "ranges_m"}
+    assert (out["sensor"], out["model"], out["time_s"], out["unit"]) == ("urg", "urg-04lx", 1.0, "mm")
+    assert len(out["angles_deg"]) == len(out["values"]) == len(out["ranges_m"]) == 769
+    assert out["angles_deg"][384] == 0.0 and out["angles_deg"][0] == -135.0
+    assert out["values"][384] == 3000 and out["ranges_m"][384] == 3.0
+    assert out["values"][0] == 0 and out["ranges_m"][0] is None
+
+
+def test_time_moves_the_keyframed_smoke(scene_file):
+    """0.008 d/10 s × 2 m of fog passes 0.007 d·m at t = 4.375 s."""
+    assert scan(str(scene_file), "--sensor", "urg", "--time", "4.3")["values"][384] == 3000
+    late = scan(str(scene_file), "--sensor", "urg", "--time", "4.45")
+    assert late["values"][384] == 1 and late["ranges_m"][384] is None
+
+
+def test_lms_scan_uses_the_scene_window_and_unit(scene_file):
+    out = scan(str(scene_file), "--sensor", "lms", "--time", "0")
+    assert (out["model"], out["unit"]) == ("lms200", "cm")
+    assert out["angles_deg"] == [float(a) for a in range(-50, 51)]  # 100° at 1°: device 40°..140°
+    assert out["values"][50] == 300
+    assert out["values"][30] == round(300 / math.cos(math.radians(20)))
+    assert out["ranges_m"][50] == 3.0
+
+
+def test_seed_override_changes_only_the_plume(scene_file):
+    args = (str(scene_file), "--sensor", "urg", "--time", "6")
+    default, same, other = scan(*args), scan(*args, "--seed", "3"), scan(*args, "--seed", "4")
+    assert default == same
+    assert default["values"] != other["values"]
+    assert default["values"][384] == other["values"][384]  # the straight-ahead beam never meets the plume
+
+
+def test_bundled_scene_by_name():
+    out = scan("railway", "--sensor", "urg", "--time", "5")
+    assert out["sensor"] == "urg" and len(out["values"]) == 769
+
+
+def test_unknown_sensor_is_one_line_exit_2(scene_file):
+    result = lrf("scan", str(scene_file), "--sensor", "front")
+    assert result.returncode == 2
+    assert result.stdout == ""
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "front" in lines[0] and "urg, lms" in lines[0]
+    assert "Traceback" not in result.stderr
+
+
+def test_missing_sensor_option_is_a_usage_error(scene_file):
+    result = lrf("scan", str(scene_file))
+    assert result.returncode == 2 and "--sensor" in result.stderr and "Traceback" not in result.stderr
