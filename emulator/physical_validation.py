@@ -244,13 +244,14 @@ def _render_section(figures_dir: Path) -> str:
 
     # Target 4, the URG's regimes and the materials of section 3.3
     densities = np.array([0.0, 0.0005, 0.001, 0.0015, 0.002, 0.003, 0.004, 0.006, 0.008, 0.012, 0.02, 0.04])
-    lms_ranges = lms_homogeneous_ranges(densities)
+    lms_densities = densities[densities <= 0.012]  # denser: the reading is inside the first range bin (docs/physical-model.md §5)
+    lms_ranges = lms_homogeneous_ranges(lms_densities)
     urg = urg_readings(densities, "white_paper")
     urg_short = np.where(urg >= MIN_VALUE_MM, urg / 1000.0, np.nan)
     material_densities = np.linspace(0.0, 0.0034, 18)
     materials = {name: urg_readings(material_densities, name, times_s=np.arange(0.0, 40.0, 2.0)) for name in ("white_paper", "gold_paper", "rusty_steel")}
     figure, (left, right) = plt.subplots(1, 2, figsize=(10, 3.6), dpi=100)
-    left.plot(densities * 1000, lms_ranges, marker="o", label="LMS200 mean range")
+    left.plot(lms_densities * 1000, lms_ranges, marker="o", label="LMS200 mean range")
     left.plot(densities * 1000, np.nanmean(urg_short, axis=0), marker="s", label="URG-04LX mean range")
     left.plot(densities * 1000, np.mean(urg < MIN_VALUE_MM, axis=0) * 2.0, linestyle=":", color="red", label="URG error share × 2 m")
     left.set_xscale("symlog", linthresh=0.5)

@@ -196,6 +196,13 @@ def _material_arrays(beams: Beams, objects: np.ndarray, params: PhysicalParams) 
     return picked[..., 0], picked[..., 1], picked[..., 2]
 
 
+def bin_fractions(params: PhysicalParams) -> np.ndarray:
+    """Bin edges as fractions of a beam's smoke extent, each bin `bin_growth` times the previous:
+    fine where the smoke begins, where a first echo forms in dense smoke."""
+    widths = params.bin_growth ** np.arange(params.bins)
+    return np.concatenate([[0.0], np.cumsum(widths) / widths.sum()])
+
+
 def _smoke_echoes(
     hits: BeamHits,
     crossings: BeamPuffCrossings,
@@ -208,7 +215,7 @@ def _smoke_echoes(
 ) -> SmokeEchoes:
     rows = np.flatnonzero(np.isfinite(start) & (end > start)) if params.backscatter else np.zeros(0, dtype=np.int64)
     low, high = start[rows], end[rows]
-    edges = low[:, None] + (high - low)[:, None] * np.linspace(0.0, 1.0, params.bins + 1)
+    edges = low[:, None] + (high - low)[:, None] * bin_fractions(params)
     path = factor[rows, None] * (_region_path_to(hits, rows, edges) + crossings.optical_path_to(edges, rows))
     width = np.diff(edges, axis=1)
     local_extinction = extinction * np.diff(path, axis=1) / np.where(width > 0, width, 1.0)

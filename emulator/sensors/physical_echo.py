@@ -148,13 +148,23 @@ def _crossing_on_grid(cumulative: np.ndarray, edges_m: np.ndarray, level: float)
 
 
 def _cumulative_at(cumulative: np.ndarray, edges_m: np.ndarray, points_m: np.ndarray) -> np.ndarray:
-    """Cumulative smoke energy at `points_m` (N, S), linear within each uniform bin."""
+    """Cumulative smoke energy at `points_m` (N, S), linear within each bin.
+
+    Every row's bin edges are the same fractions of its own extent (only the
+    start and length differ), so one binary search on those fractions serves all rows.
+    """
     start, stop = edges_m[:, :1], edges_m[:, -1:]
+    length = stop - start
+    widest = int(np.argmax(length[:, 0])) if len(length) else 0
+    if len(length) and length[widest, 0] > 0:
+        fractions = (edges_m[widest] - start[widest]) / length[widest]
+    else:
+        fractions = np.linspace(0.0, 1.0, edges_m.shape[1])
     bins = cumulative.shape[1] - 1
-    width = np.where(stop > start, (stop - start) / bins, 1.0)
-    position = np.clip((np.where(np.isfinite(points_m), points_m, stop) - start) / width, 0.0, bins)
-    index = np.minimum(np.floor(position).astype(np.int64), bins - 1)
-    fraction = position - index
+    along = (np.where(np.isfinite(points_m), points_m, stop) - start) / np.where(length > 0, length, 1.0)
+    along = np.clip(along, 0.0, 1.0)
+    index = np.clip(np.searchsorted(fractions, along, side="right") - 1, 0, bins - 1)
+    fraction = (along - fractions[index]) / (fractions[index + 1] - fractions[index])
     low = np.take_along_axis(cumulative, index, axis=1)
     high = np.take_along_axis(cumulative, index + 1, axis=1)
     return low + fraction * (high - low)

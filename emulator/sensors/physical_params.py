@@ -95,8 +95,9 @@ class PhysicalParams:
     fluctuation_length_m: float = 0.3
     fluctuation_modes: int = 12
     fluctuation_time_s: float = 1.5
-    # range bins along each beam's smoke
+    # range bins along each beam's smoke, each this much wider than the one before
     bins: int = 16
+    bin_growth: float = 1.25
     sub_rays: int = 3
     edge_jump: float = 0.05  # neighbours' ranges differing by this fraction mark a depth edge
     urg: UrgReceiver = field(default_factory=lambda: UrgReceiver(overlap_m=0.3, footprint_rad=np.radians(0.36)))
