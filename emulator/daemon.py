@@ -62,7 +62,7 @@ class ScanSource(Protocol):
 
 
 SensorFactory = Callable[[SensorSpec], ScanSource]
-DeviceFactory = Callable[[SensorSpec, Callable[..., Scan], float], Device]
+DeviceFactory = Callable[[SensorSpec, Callable[..., Scan]], Device]
 
 
 class ScanCache:
@@ -109,18 +109,19 @@ def simulated_sensors(scene: Scene) -> SensorFactory:
     return lambda spec: create_sensor(scene, spec.name, world=world)
 
 
-def build_device(spec: SensorSpec, scans: Callable[..., Scan], start_time: float) -> Device:
-    """The protocol device for the sensor's model, configured from its scene options."""
+def build_device(spec: SensorSpec, scans: Callable[..., Scan]) -> Device:
+    """The protocol device for the sensor's model, configured from its scene options.
+    It powers on at simulated time 0: a URG stamp is the scan's simulated time in ms."""
     if spec.model not in DEVICE_OPTIONS:
         raise UserError(f"sensor {spec.name!r}: no protocol for model {spec.model!r}")
     options = {key: spec.options[key] for key in DEVICE_OPTIONS[spec.model] if key in spec.options}
     if spec.model == "urg-04lx":
         from protocols.scip import UrgDevice
 
-        return UrgDevice(scans, start_time=start_time, **options)
+        return UrgDevice(scans, **options)
     from protocols.lms2xx import Lms200Device
 
-    return Lms200Device(scans, start_time=start_time, **options)
+    return Lms200Device(scans, **options)
 
 
 @dataclass(frozen=True)
@@ -266,11 +267,10 @@ class Daemon:
         """Open every endpoint, calling `on_ready` as each one serves."""
         factory = self._sensor_factory or simulated_sensors(self.scene)
         self._timer = PreciseTimer(loop)
-        start_time = self.clock.now()
         for spec, addresses in self._plan:
             scans = ScanCache(factory(spec), self._scan_thread)
             for address in addresses:
-                device = self._device_factory(spec, scans, start_time)
+                device = self._device_factory(spec, scans)
                 session = DeviceSession(device, self.clock, loop, scans.prefetch, self._timer.call_later)
                 ready = self._open(spec, address, session, loop)
                 self.sessions.append(session)
