@@ -10,7 +10,7 @@ fluctuations and datasheet noise make it flicker. The two receivers differ:
   their power-weighted mean (pulled toward the sensor by smoke). Codes:
   1 too weak (0 when nothing solid is in reach and the smoke alone would not
   extinguish the reference target), 8 when the blend decoheres (two-wave
-  intensity mismatch), 19 below 20 mm.
+  intensity mismatch), 19 below 20 mm, 0 beyond 5600 mm.
 - LMS200 (pulsed, first echo): the first distance where the integrated echo
   energy reaches its threshold; a dense plume front triggers it (smoke seen as
   an obstacle); a smeared rise at a plume edge gives 8187 (signal-to-noise
@@ -36,6 +36,7 @@ from emulator.sensors.physical_params import DEFAULT_PARAMS, PhysicalParams
 from emulator.sensors.response import PRESET_MODULES, Beams
 
 URG_INCOHERENT = 8  # SCIP: intensity of the two waves do not match
+URG_MAX_VALUE_MM = int(round(urg04lx.MAX_RANGE_M * 1000.0))
 LMS_SIGNAL_TO_NOISE = 8187  # LMS2xx: signal-to-noise ratio too small
 
 
@@ -59,6 +60,7 @@ def urg_values(hits: BeamHits, beams: Beams, params: PhysicalParams = DEFAULT_PA
         range_m = range_m + urg_range_noise_m(scan_rng(beams.scene.seed, beams.sensor.name, beams.time_s), range_m)
     millimetres = np.rint(np.where(detected, range_m, 0.0) * 1000.0).astype(np.int64)
     values = np.where(millimetres < urg04lx.MIN_VALUE_MM, urg04lx.NON_MEASURABLE, millimetres)
+    values = np.where(millimetres > URG_MAX_VALUE_MM, urg04lx.NO_ECHO, values)  # stretched or noisy past DMAX
     values = np.where(coherent, values, URG_INCOHERENT)
     has_surface = surfaces.present.any(axis=1)
     smoke_extinguishes = physics.optical_path_to_end > params.penetration_power
