@@ -16,7 +16,6 @@ from emulator.sensors.physical_params import LMS_SIGMA_M, LMS_SYSTEMATIC_M, Phys
 _FLUCTUATION_STREAM = 0xF1
 _NOISE_STREAM = 0x4E
 _BIAS_STREAM = 0xB1
-_FLUCTUATION_ANGLE_RAD = np.radians(2.0)  # angular correlation of the fluctuation field (assumption)
 
 
 def _sensor_key(seed: int, sensor: str) -> list[int]:
@@ -32,13 +31,13 @@ def fluctuation_field(seed: int, sensor: str, angles_rad: np.ndarray, time_s: fl
     """A smooth field in (beam angle, time) with zero median and unit variance.
 
     A sum of random travelling cosines (random wavenumbers, frequencies and
-    phases fixed per seed and sensor): correlated over about 2° and
-    `fluctuation_time_s`, so neighbouring beams and consecutive scans flicker
+    phases fixed per seed and sensor): correlated over about
+    `fluctuation_angle_deg` and `fluctuation_time_s`, so neighbouring beams and consecutive scans flicker
     together.
     """
     rng = np.random.default_rng(_sensor_key(seed, sensor) + [_FLUCTUATION_STREAM])
     modes = params.fluctuation_modes
-    wavenumber = rng.normal(0.0, 1.0 / _FLUCTUATION_ANGLE_RAD, modes)
+    wavenumber = rng.normal(0.0, 1.0 / np.radians(params.fluctuation_angle_deg), modes)
     frequency = rng.normal(0.0, 2.0 * np.pi / params.fluctuation_time_s, modes)
     phase = rng.uniform(0.0, 2.0 * np.pi, modes)
     argument = np.outer(angles_rad, wavenumber) + frequency * time_s + phase

@@ -94,6 +94,7 @@ class PhysicalParams:
     fluctuation_edge: float = 0.9
     fluctuation_length_m: float = 0.3
     fluctuation_modes: int = 12
+    fluctuation_angle_deg: float = 2.0
     fluctuation_time_s: float = 1.5
     # range bins along each beam's smoke, each this much wider than the one before
     bins: int = 16
