@@ -18,7 +18,7 @@ from embreex.rtcore_scene import EmbreeScene
 from emulator.errors import SceneError
 from emulator.optics.chords import NO_HIT, paired_slab_intervals, shape_intervals
 from emulator.optics.hits import BeamHits, RegionCrossing
-from emulator.scene.geometry import shape_mesh, world_mesh, world_to_local
+from emulator.scene.geometry import shape_mesh, world_mesh
 from emulator.scene.model import MeshFile, Scene
 from emulator.scene.plumes import Particles, particles_at
 
@@ -42,6 +42,7 @@ class World:
         if len(triangles):
             self._embree = EmbreeScene()
             TriangleMesh(self._embree, triangles.astype(np.float32))
+        self._region_rotations = [region.pose.rotation_matrix() for region in scene.regions]
         self._region_meshes: dict[int, trimesh.Trimesh] = {
             i: shape_mesh(region.shape) for i, region in enumerate(scene.regions) if isinstance(region.shape, MeshFile)
         }
@@ -118,7 +119,9 @@ class World:
         self, index: int, origins: np.ndarray, directions: np.ndarray, max_range_m: float, time_s: float
     ) -> RegionCrossing:
         region = self.scene.regions[index]
-        local_origins, local_directions = world_to_local(region.pose, origins, directions)
+        rotation = self._region_rotations[index]
+        local_origins = (origins - np.asarray(region.pose.position)) @ rotation
+        local_directions = directions @ rotation
         entry, exit_ = shape_intervals(region.shape, local_origins, local_directions, self._region_meshes.get(index))
         entry = np.maximum(entry, 0.0)
         exit_ = np.minimum(exit_, max_range_m)
@@ -135,9 +138,9 @@ class World:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Entry distance and density of the first particle box before each beam's end.
 
-        Particles outside the beams' bounding box are dropped first; a
-        bounding-sphere test over the remaining beams × particles picks the
-        candidate pairs; the exact slab test runs on those only.
+        Particles outside the beams' bounding box are dropped first; a test
+        of the remaining particles' bounding spheres against every beam picks
+        the candidate pairs; the exact slab test runs on those only.
         """
         first_range = np.full(len(origins), np.inf)
         first_density = np.zeros(len(origins))
@@ -145,20 +148,7 @@ class World:
         if len(particles) == 0 or len(origins) == 0:
             return first_range, first_density
         centers, half_sizes, density = self._near_beams(particles, origins, directions, beam_end)
-        radius = half_sizes * np.sqrt(3.0)
-        origin_along = np.einsum("ij,ij->i", origins, directions)
-        along = directions @ centers.T - origin_along[:, None]
-        distance_squared = (
-            np.einsum("ij,ij->i", centers, centers)[None, :]
-            - 2.0 * (origins @ centers.T)
-            + np.einsum("ij,ij->i", origins, origins)[:, None]
-        )
-        candidate = (
-            (distance_squared - along * along <= (radius * radius)[None, :] + 1e-9)
-            & (along >= -radius[None, :])
-            & (along <= beam_end[:, None] + radius[None, :])
-        )
-        beam, particle = np.nonzero(candidate)
+        beam, particle = self._candidate_pairs(origins, directions, beam_end, centers, half_sizes * np.sqrt(3.0))
         if len(beam) == 0:
             return first_range, first_density
         half = half_sizes[particle, None]
@@ -175,6 +165,35 @@ class World:
         first_range[beam[first]] = entry[first]
         first_density[beam[first]] = density[particle[first]]
         return first_range, first_density
+
+    @staticmethod
+    def _candidate_pairs(
+        origins: np.ndarray, directions: np.ndarray, beam_end: np.ndarray, centers: np.ndarray, radius: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(beam, particle) index pairs whose bounding sphere the beam may cross: a superset of the hits."""
+        if np.all(origins == origins[0]):
+            # one scanner: the sphere is hit iff the beam lies in its cone of half-angle asin(r / distance)
+            offset = centers - origins[0]
+            distance = np.sqrt(np.einsum("ij,ij->i", offset, offset))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                cos_limit = np.sqrt(np.clip(1.0 - (radius / distance) ** 2, 0.0, 1.0)) - 1e-9
+                towards = offset / distance[:, None]
+            cos_limit = np.where(distance <= radius, -np.inf, cos_limit)  # origin inside: every beam
+            cos_limit = np.where(distance - radius > beam_end.max(), np.inf, cos_limit)  # out of reach: none
+            towards = np.where(distance[:, None] > 0, towards, 0.0)
+            return np.nonzero(directions @ towards.T >= cos_limit[None, :])
+        origin_along = np.einsum("ij,ij->i", origins, directions)
+        along = directions @ centers.T - origin_along[:, None]
+        distance_squared = (
+            np.einsum("ij,ij->i", centers, centers)[None, :]
+            - 2.0 * (origins @ centers.T)
+            + np.einsum("ij,ij->i", origins, origins)[:, None]
+        )
+        return np.nonzero(
+            (distance_squared - along * along <= (radius * radius)[None, :] + 1e-9)
+            & (along >= -radius[None, :])
+            & (along <= beam_end[:, None] + radius[None, :])
+        )
 
     @staticmethod
     def _near_beams(

@@ -39,6 +39,15 @@ class LmsSensor:
         self.scene, self.spec, self.world = scene, spec, world
         self.name = spec.name
         self._response = response_model(scene.model)
+        self._rays: dict[tuple[float, float, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+    def _beams(self, start_deg: float, step_deg: float, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Sensor-frame angles, origins and directions of a window (a device uses few windows: cached)."""
+        key = (start_deg, step_deg, count)
+        if key not in self._rays:
+            angles_rad = np.radians(device_angles_deg(start_deg, step_deg, count) - 90.0)
+            self._rays[key] = (angles_rad, *scan_plane_rays(self.spec.pose, angles_rad))
+        return self._rays[key]
 
     def scan(
         self, time_s: float, *, start_deg: float = 0.0, step_deg: float = 0.5, count: int = 361, unit: str = "mm"
@@ -46,8 +55,7 @@ class LmsSensor:
         """Values at device angles start_deg + i·step_deg (i < count), in `unit`, at `time_s`."""
         if unit not in UNITS_PER_M:
             raise ValueError(f"unit must be one of {sorted(UNITS_PER_M)}, got {unit!r}")
-        angles_rad = np.radians(device_angles_deg(start_deg, step_deg, count) - 90.0)
-        origins, directions = scan_plane_rays(self.spec.pose, angles_rad)
+        angles_rad, origins, directions = self._beams(start_deg, step_deg, count)
         hits = self.world.cast(origins, directions, REACH_M, time_s)
         beams = Beams(self.scene, self.spec, self.world, time_s, angles_rad, origins, directions)
         values = np.asarray(self._response.lms_values(hits, beams, unit), dtype=np.int64)
