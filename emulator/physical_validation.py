@@ -243,7 +243,7 @@ def _render_section(figures_dir: Path) -> str:
     plt.close(figure)
 
     # Target 4, the URG's regimes and the materials of section 3.3
-    densities = np.array([0.0, 0.0005, 0.001, 0.0015, 0.002, 0.003, 0.004, 0.006, 0.008, 0.012, 0.02, 0.04])
+    densities = np.array([0.0, 0.0005, 0.001, 0.0015, 0.002, 0.003, 0.004, 0.006, 0.008, 0.012, 0.02, 0.04, 0.08, 0.2])
     lms_densities = densities[densities <= 0.012]  # denser: readings of a few cm (docs/physical-model.md §4)
     lms_ranges = lms_homogeneous_ranges(lms_densities)
     urg = urg_readings(densities, "white_paper")

@@ -191,3 +191,19 @@ def test_replay_refuses_a_log_of_the_other_model(tmp_path: Path) -> None:
         write_log(out, [urg_scan(0.0, np.zeros(769, dtype=int))], LogHeader("urg", "urg-04lx", "mm"))
     with pytest.raises(UserError, match="recorded from a urg-04lx, not a lms200"):
         replay_sensor(read_log(path), "lms200", "lms")
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--model", "lms200"], "the log was recorded from a urg-04lx, not a lms200"),
+        (["--model", "urg-04lx", "--endpoint", "bogus:x"], "endpoint 'bogus:x': expected pty:PATH or tcp:HOST:PORT"),
+    ],
+)
+def test_replay_errors_are_one_line(tmp_path: Path, args: list[str], message: str) -> None:
+    path = tmp_path / "urg.log"
+    with path.open("w") as out:
+        write_log(out, [urg_scan(0.0, np.zeros(769, dtype=int))], LogHeader("urg", "urg-04lx", "mm"))
+    result = subprocess.run([*CLI, "replay", str(path), *args], capture_output=True, text=True, timeout=60, cwd=tmp_path)
+    assert result.returncode == 2
+    assert result.stderr.strip() == f"lrf-emulator replay: {message}"
