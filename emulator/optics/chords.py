@@ -32,32 +32,24 @@ def _slab(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Slab test of rays against axis-aligned boxes → near, far.
 
-    Arguments broadcast against each other; their last axis is the A axes
+    Arguments broadcast against each other; their last axis holds the axes
     tested. The ray is inside the box for near < t < far (empty when
     far < near). A direction component of exactly 0 keeps the ray inside
     that axis's slab for all t when its origin lies within it, and outside
     otherwise.
     """
-    shape = np.broadcast_shapes(origins.shape[:-1], directions.shape[:-1], lower.shape[:-1], upper.shape[:-1])
-    near = np.full(shape, -np.inf)
-    far = np.full(shape, np.inf)
-    for axis in range(origins.shape[-1]):
-        o, d = origins[..., axis], directions[..., axis]
-        low, high = lower[..., axis], upper[..., axis]
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # d may be 0 or subnormal
-            inverse = 1.0 / d
-            t_lower = (low - o) * inverse
-            t_upper = (high - o) * inverse
-        axis_near = np.minimum(t_lower, t_upper)
-        axis_far = np.maximum(t_lower, t_upper)
-        parallel = d == 0.0
-        if parallel.any():
-            inside = (low <= o) & (o <= high)
-            axis_near = np.where(parallel, np.where(inside, -np.inf, np.inf), axis_near)
-            axis_far = np.where(parallel, np.where(inside, np.inf, -np.inf), axis_far)
-        np.maximum(near, axis_near, out=near)
-        np.minimum(far, axis_far, out=far)
-    return near, far
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # d may be 0 or subnormal
+        inverse = 1.0 / directions
+        t_lower = (lower - origins) * inverse
+        t_upper = (upper - origins) * inverse
+    near = np.minimum(t_lower, t_upper)
+    far = np.maximum(t_lower, t_upper)
+    parallel = np.broadcast_to(directions == 0.0, near.shape)
+    if parallel.any():
+        inside = (lower <= origins) & (origins <= upper)
+        near = np.where(parallel, np.where(inside, -np.inf, np.inf), near)
+        far = np.where(parallel, np.where(inside, np.inf, -np.inf), far)
+    return near.max(axis=-1), far.min(axis=-1)
 
 
 def slab_intervals(

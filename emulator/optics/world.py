@@ -179,9 +179,10 @@ class World:
                 cos_limit = np.sqrt(np.clip(1.0 - (radius / distance) ** 2, 0.0, 1.0)) - 1e-9
                 towards = offset / distance[:, None]
             cos_limit = np.where(distance <= radius, -np.inf, cos_limit)  # origin inside: every beam
-            cos_limit = np.where(distance - radius > beam_end.max(), np.inf, cos_limit)  # out of reach: none
             towards = np.where(distance[:, None] > 0, towards, 0.0)
-            return np.nonzero(directions @ towards.T >= cos_limit[None, :])
+            cosine = directions @ towards.T
+            # and the sphere must begin before the beam ends: its centre's distance along the beam − r
+            return np.nonzero((cosine >= cos_limit[None, :]) & (cosine * distance[None, :] - radius[None, :] <= beam_end[:, None]))
         origin_along = np.einsum("ij,ij->i", origins, directions)
         along = directions @ centers.T - origin_along[:, None]
         distance_squared = (
