@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -14,6 +15,7 @@ from emulator.scene.material_optics import BUILTIN_OPTICS, patch_values
 from emulator.scene.materials import BUILTIN_MATERIALS
 from emulator.scene.plumes import Particles
 from emulator.sensors.physical_echo import lms_first_echo, log_target_echo, log_threshold, range_law, smoke_bin_echo
+from emulator.sensors.physical_noise import edge_strength, fluctuation_factor, fluctuation_field
 from emulator.sensors.physical_params import DEFAULT_PARAMS, LmsReceiver
 
 K = 250.0  # density_to_extinction, 1/m per density unit
@@ -145,3 +147,16 @@ def test_material_optics_cover_the_paper_surfaces_and_patches_are_fixed():
     np.testing.assert_array_equal(values, patch_values(points, seed=5))
     assert not np.array_equal(values, patch_values(points, seed=6))
     assert abs(values.mean()) < 0.1 and values.std() == pytest.approx(1.0, abs=0.1)
+
+
+def test_fluctuations_are_strongest_on_smoke_edges_and_have_median_one():
+    angles = np.radians(np.linspace(-30, 30, 121))
+    lateral = 3.0 * np.tan(angles)  # a plume 3 m ahead, its column Gaussian across the beams
+    column = 0.03 * np.exp(-(lateral**2) / (2 * 0.3**2)) + 1e-12
+    edges = edge_strength(column, angles, np.full(len(angles), 3.0), DEFAULT_PARAMS.fluctuation_length_m)
+    assert edges[60] < 0.05 and edges[np.argmin(np.abs(lateral - 0.45))] > 0.9
+    assert np.all(edge_strength(np.full(121, 0.01), angles, np.full(121, 3.0), 0.3) == 0.0)
+    field = np.concatenate([fluctuation_field(9, "lms", angles, t, DEFAULT_PARAMS) for t in np.arange(0.0, 600.0, 3.0)])
+    assert abs(np.median(field)) < 0.1 and field.std() == pytest.approx(1.0, abs=0.15)
+    off = fluctuation_factor(9, "lms", angles, 1.0, column, np.full(121, 3.0), dataclasses.replace(DEFAULT_PARAMS, fluctuation=False))
+    assert np.all(off == 1.0)
