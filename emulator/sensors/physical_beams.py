@@ -52,12 +52,15 @@ class SmokeEchoes:
 
 @dataclass(frozen=True)
 class BeamPhysics:
+    """Everything a receiver needs, per beam."""
+
     surfaces: Surfaces
     smoke: SmokeEchoes
     optical_path_to_end: np.ndarray  # fluctuation included
 
 
 def beam_physics(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, params: PhysicalParams) -> BeamPhysics:
+    """Surfaces and smoke echoes of one scan's beams as `receiver` sees them."""
     scene = beams.scene
     extinction = scene.density_to_extinction
     beam_end = hits.beam_end_m
