@@ -146,12 +146,15 @@ def scans_section(quick: bool) -> BenchSection:
                 "period_ms": period_ms,
                 "fraction": scan_ms / period_ms,
             })
-    lines = [f"scans: compute time per scan with smoke (mean and max over {len(times)} instants in 1..60 s, best of {SCAN_REPEATS} each)"]
-    lines.append(f"  {'scene':<10} {'sensor':<8} {'model':<9} {'scan ms':>8} {'max ms':>7} {'period ms':>10} {'fraction':>9}")
+    lines = [
+        f"scans: compute time per scan with smoke (mean and max over {len(times)} instants in 1..60 s,"
+        f" best of {SCAN_REPEATS} each)",
+        f"  {'scene':<10} {'sensor':<8} {'model':<9} {'scan ms':>8} {'max ms':>7} {'period ms':>10} {'fraction':>9}",
+    ]
     for row in rows:
         lines.append(
-            f"  {row['scene']:<10} {row['sensor']:<8} {row['model']:<9} {row['scan_ms']:>8.2f} {row['max_scan_ms']:>7.2f}"
-            f" {row['period_ms']:>10.2f} {row['fraction']:>8.1%}"
+            f"  {row['scene']:<10} {row['sensor']:<8} {row['model']:<9} {row['scan_ms']:>8.2f}"
+            f" {row['max_scan_ms']:>7.2f} {row['period_ms']:>10.2f} {row['fraction']:>8.1%}"
         )
     return BenchSection({"scans": rows}, lines)
 

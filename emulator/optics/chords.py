@@ -135,7 +135,8 @@ def mesh_intervals(
     rows = max(1, _CROSSING_CHUNK // max(1, len(triangles)))
     distance_parts, orientation_parts = [], []
     for start in range(0, len(origins), rows):
-        t, sign = _ray_triangle_crossings(origins[start : start + rows], directions[start : start + rows], triangles, normals)
+        chunk = slice(start, start + rows)
+        t, sign = _ray_triangle_crossings(origins[chunk], directions[chunk], triangles, normals)
         distance_parts.append(t)
         orientation_parts.append(sign)
     distances = np.concatenate(distance_parts)

@@ -22,6 +22,7 @@ from emulator.scene.geometry import shape_mesh, world_mesh
 from emulator.scene.model import MeshFile, Scene
 from emulator.scene.plumes import Particles, particles_at
 
+
 class World:
     """A scene ready for casting: build once per scene, cast at any time."""
 
@@ -75,7 +76,9 @@ class World:
         directions = np.asarray(directions, dtype=float)
         solid_range, object_index, reflectivity, cos_incidence = self._solids(origins, directions, max_range_m)
         beam_end = np.minimum(solid_range, max_range_m)
-        regions = tuple(self._region_crossing(i, origins, directions, max_range_m, time_s) for i in range(len(self.scene.regions)))
+        regions = tuple(
+            self._region_crossing(i, origins, directions, max_range_m, time_s) for i in range(len(self.scene.regions))
+        )
         optical_path = np.zeros(len(origins))
         for crossing in regions:
             if crossing.density:
@@ -182,7 +185,8 @@ class World:
             towards = np.where(distance[:, None] > 0, towards, 0.0)
             cosine = directions @ towards.T
             # and the sphere must begin before the beam ends: its centre's distance along the beam − r
-            return np.nonzero((cosine >= cos_limit[None, :]) & (cosine * distance[None, :] - radius[None, :] <= beam_end[:, None]))
+            starts_in_reach = cosine * distance[None, :] - radius[None, :] <= beam_end[:, None]
+            return np.nonzero((cosine >= cos_limit[None, :]) & starts_in_reach)
         origin_along = np.einsum("ij,ij->i", origins, directions)
         along = directions @ centers.T - origin_along[:, None]
         distance_squared = (

@@ -55,7 +55,8 @@ class UrgSensor:
     def scan(self, time_s: float) -> Scan:
         """The scan completed at simulated time `time_s` (the world evaluated at that instant)."""
         hits = self.world.cast(self._origins, self._directions, MAX_RANGE_M, time_s)
-        beams = Beams(self.scene, self.spec, self.world, time_s, self.angles_rad[self._valid], self._origins, self._directions)
+        angles = self.angles_rad[self._valid]
+        beams = Beams(self.scene, self.spec, self.world, time_s, angles, self._origins, self._directions)
         values = np.full(STEPS, OUTSIDE_VALID_AREA, dtype=np.int64)
         values[self._valid] = self._response.urg_values(hits, beams)
         return Scan(self.name, MODEL, time_s, self.angles_rad, values, "mm")
