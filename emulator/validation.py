@@ -231,13 +231,15 @@ clouds collide, generating turbulence and swiftly fluctuating smoke densities."'
 **Paper, simulated (§5, Fig. 10; §6):**
 {_quote('''"Both for the simulation and for the real measurements the passage of smoke plumes from left
 to right can be observed. Note that for the Sick LMS200 the smoke is mainly seen as an obstacle"
-— and §6: "At the edges of the smoke cloud, the SICK sometimes returns error values, as can be
-seen in Fig. 10. [...] This is not implemented."''')}
+— and §6: "the Sick LMS200 [...] returns the distance to the smoke if the smoke density level is
+higher than the threshold. This behavior is implemented as the default behavior in the simulation
+of the Sick laser range finder. At the edges of the smoke cloud, the SICK sometimes returns error
+values, as can be seen in Fig. 10."''')}
 
 **Ours:** the puffs cross as diagonal stripes from left to right; static obstacles are the
 vertical bands; the beams meeting a plume return the range to it. As in the paper's simulation,
-and unlike the real data, there are no error codes at the plume edges: `formsma2011` does not
-model them (the `physical` preset is meant to).
+and unlike the real data, there are no error codes at the plume edges: the rule of §4.3 that
+`formsma2011` implements has nothing that produces them (the `physical` preset is meant to).
 
 | beams whose first obstacle is a plume particle ({plume_total} beam readings over {len(series.times_s)} scans) | share |
 |---|---|
