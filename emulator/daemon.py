@@ -7,8 +7,8 @@ machine) and transport. Each device is woken at its `next_deadline()`
 (simulated time, mapped to wall time through the clock's speed).
 
 Scans are computed on one "scan thread", ahead of time: a scan at simulated
-time t is a pure function of t, so as soon as a device names its next
-deadline the scan for it is started, and it is ready when the device asks.
+time t is a pure function of t, so shortly before a device's next deadline
+the scan it will ask for is started, and it is ready when the device asks.
 Computing on the loop thread at the deadline took 1–8 ms (railway), which
 showed up as scan-period jitter and command latency (docs/transports.md).
 """
@@ -24,19 +24,23 @@ from typing import Any, Callable, Mapping, Protocol, Sequence
 
 from emulator.clock import WallClock
 from emulator.errors import UserError
+from emulator.optics import World
 from emulator.scene.model import Scene, SensorSpec
+from emulator.sensors import create_sensor
 from emulator.sensors.scan import Scan
 from emulator.transport import Address, PtyAddress, TcpAddress, parse_endpoint
 from emulator.transport.pty import PtyEndpoint
 from emulator.transport.tcp import TcpEndpoint
 from emulator.transport.timer import PreciseTimer
 from protocols.device import Device, Output
+from protocols.lms2xx import Lms200Device
+from protocols.scip import UrgDevice
 
-SCAN_CACHE_SIZE = 32
+SCAN_CACHE_SIZE = 32  # recent scan requests per sensor; endpoints of one sensor share them
 # Start a scan this long (wall) before its deadline: early enough to be ready,
 # late enough not to compete for the CPU with the previous scan's delivery
 # (on a pty the kernel forwards bytes on a worker thread that a busy CPU delays).
-PREFETCH_LEAD_S = 0.07  # recent scan requests per sensor; endpoints of one sensor share them
+PREFETCH_LEAD_S = 0.07
 
 # the SensorSpec options each protocol device takes (SCENE_FORMAT.md)
 DEVICE_OPTIONS: dict[str, tuple[str, ...]] = {
@@ -102,9 +106,6 @@ class ScanCache:
 
 def simulated_sensors(scene: Scene) -> SensorFactory:
     """Sensors computed from the scene, all sharing one optics world."""
-    from emulator.optics import World
-    from emulator.sensors import create_sensor
-
     world = World(scene)
     return lambda spec: create_sensor(scene, spec.name, world=world)
 
@@ -116,11 +117,7 @@ def build_device(spec: SensorSpec, scans: Callable[..., Scan]) -> Device:
         raise UserError(f"sensor {spec.name!r}: no protocol for model {spec.model!r}")
     options = {key: spec.options[key] for key in DEVICE_OPTIONS[spec.model] if key in spec.options}
     if spec.model == "urg-04lx":
-        from protocols.scip import UrgDevice
-
         return UrgDevice(scans, **options)
-    from protocols.lms2xx import Lms200Device
-
     return Lms200Device(scans, **options)
 
 
