@@ -162,7 +162,7 @@ def draw_waterfall(series: SensorSeries, out: Path, *, width_px: int = 1200, hei
     dpi = 100
     side = 2 * series.has_regions + series.has_plumes
     figure = plt.figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi)
-    grid = figure.add_gridspec(1, 1 + side, width_ratios=[3] + [1] * side, wspace=0.08)
+    grid = figure.add_gridspec(1, 1 + side, width_ratios=[3] + [1] * side, wspace=0.12)
     axes = figure.add_subplot(grid[0, 0])
     degrees = np.degrees(series.angles_rad)
     axes.imshow(
@@ -181,7 +181,7 @@ def draw_waterfall(series: SensorSeries, out: Path, *, width_px: int = 1200, hei
     if series.has_regions:
         density_axes = figure.add_subplot(grid[0, column], sharey=axes)
         density_axes.plot(series.mean_density * 1000.0, series.times_s, color="tab:blue")
-        density_axes.set_xlabel("mean density along beams (10⁻³ d)")
+        density_axes.set_xlabel("mean density\nalong beams (10⁻³ d)")
         density_axes.tick_params(labelleft=False)
         saturation_axes = figure.add_subplot(grid[0, column + 1], sharey=axes)
         saturation_axes.plot(series.saturation, series.times_s, color="tab:orange")
@@ -193,7 +193,7 @@ def draw_waterfall(series: SensorSeries, out: Path, *, width_px: int = 1200, hei
     if series.has_plumes:
         plume_axes = figure.add_subplot(grid[0, column], sharey=axes)
         plume_axes.plot(series.plume_share * 100.0, series.times_s, color="tab:green")
-        plume_axes.set_xlabel("beams meeting a plume (%)")
+        plume_axes.set_xlabel("beams meeting\na plume (%)")
         plume_axes.tick_params(labelleft=False)
     if series.has_regions:
         figure.text(0.01, 0.005, SATURATION_NOTE, fontsize="x-small", color="dimgrey")
