@@ -1,8 +1,8 @@
-"""`lrf-emulator bench [--json] [--quick]`: the simulation's speed on this machine.
+"""`lrf-emulator bench [--json] [--quick] [--section NAME]...`: the emulator's speed on this machine.
 
-The report is a list of sections. Each section is a function
-`(quick: bool) -> BenchSection`: `data` is merged into the JSON object and
-`lines` are printed in the table. Add a section by appending to `SECTIONS`.
+The report is a list of named sections. Each section is a function
+`(quick: bool) -> (data, lines)`: `data` is merged into the JSON object and
+`lines` are printed in the table. Add a section by adding it to `SECTIONS`.
 
 - rays: plain Embree INTERSECT versus our full cast (`World.cast`) on the same
   beams of every bundled scene's sensors with the smoke removed; several scans
@@ -12,7 +12,11 @@ The report is a list of sections. Each section is a function
   against the sensor's period: URG-04LX 100 ms; LMS200 the scan its scene
   options select against the time the mirror needs for it (1° → 1 revolution
   of 13.33 ms, 0.5° → 2, 0.25° → 4; the default 361-value scan: 26.67 ms).
-- memory: peak resident set size of this process.
+- transport: command latency and MD scan jitter through a served daemon
+  (emulator.transport.bench).
+- lms-rates: LMS200 scans/s per baud and resolution through a served daemon
+  (emulator.interop_bench).
+- memory: peak resident set size of this process (last, so it covers the others).
 """
 
 from __future__ import annotations
@@ -23,7 +27,6 @@ import json
 import resource
 import sys
 import time
-from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -40,15 +43,16 @@ SCAN_REPEATS = 3  # each instant is timed this often and the fastest kept
 LMS_REVOLUTIONS = {1.0: 1, 0.5: 2, 0.25: 4}
 
 
-@dataclass(frozen=True)
-class BenchSection:
-    data: dict
-    lines: list[str]
+Section = tuple[dict, list[str]]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     parser.add_argument("--quick", action="store_true", help="few repetitions (a smoke test of the bench itself)")
+    parser.add_argument(
+        "--section", action="append", choices=list(SECTIONS), metavar="NAME",
+        help=f"run only this section (repeatable; default all: {', '.join(SECTIONS)})",
+    )
 
 
 def _scenes() -> list[Scene]:
@@ -77,7 +81,7 @@ def _best_seconds(function: Callable[[], object], repeats: int) -> float:
     return best
 
 
-def rays_section(quick: bool) -> BenchSection:
+def rays_section(quick: bool) -> Section:
     repeats = 3 if quick else 30
     rows, raw_total, ours_total, rays_total = [], 0.0, 0.0, 0
     for scene in _scenes():
@@ -107,7 +111,7 @@ def rays_section(quick: bool) -> BenchSection:
             f" {row['ours_rays_per_s'] / 1e6:>13.2f} {row['ratio']:>6.2f}"
         )
     lines.append(f"  overall ratio (ours/raw): {ratio:.2f} (target >= 0.5)")
-    return BenchSection({"ratio": ratio, "rays": rows}, lines)
+    return {"ratio": ratio, "rays": rows}, lines
 
 
 def _scan_once(sensor, time_s: float) -> None:
@@ -124,7 +128,7 @@ def _period_ms(spec: SensorSpec) -> float:
     return revolutions * lms200.PERIOD_S * 1000.0
 
 
-def scans_section(quick: bool) -> BenchSection:
+def scans_section(quick: bool) -> Section:
     """Compute time of scans spread over the first minute of each scene (smoke on): per instant
     the fastest of SCAN_REPEATS, so other load on the machine does not count; mean and max over instants."""
     times = np.linspace(1.0, 60.0, 5 if quick else 60)
@@ -156,26 +160,45 @@ def scans_section(quick: bool) -> BenchSection:
             f"  {row['scene']:<10} {row['sensor']:<8} {row['model']:<9} {row['scan_ms']:>8.2f}"
             f" {row['max_scan_ms']:>7.2f} {row['period_ms']:>10.2f} {row['fraction']:>8.1%}"
         )
-    return BenchSection({"scans": rows}, lines)
+    return {"scans": rows}, lines
 
 
-def memory_section(quick: bool) -> BenchSection:
+def transport_section(quick: bool) -> Section:
+    from emulator.transport.bench import transport_bench  # starts a daemon: imported only when run
+
+    return transport_bench(quick)
+
+
+def lms_rates_section(quick: bool) -> Section:
+    from emulator.interop_bench import bench_section  # starts a daemon: imported only when run
+
+    return bench_section(quick)
+
+
+def memory_section(quick: bool) -> Section:
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
-    return BenchSection({"peak_rss_mb": peak_mb}, [f"memory: peak RSS {peak_mb:.1f} MB"])
+    return {"peak_rss_mb": peak_mb}, [f"memory: peak RSS {peak_mb:.1f} MB (this process)"]
 
 
-SECTIONS: list[Callable[[bool], BenchSection]] = [rays_section, scans_section, memory_section]
+SECTIONS: dict[str, Callable[[bool], Section]] = {
+    "rays": rays_section,
+    "scans": scans_section,
+    "transport": transport_section,
+    "lms-rates": lms_rates_section,
+    "memory": memory_section,
+}
 
 
 def run(args: argparse.Namespace) -> int:
-    sections = [section(args.quick) for section in SECTIONS]
+    chosen = [name for name in SECTIONS if not args.section or name in args.section]
+    report: dict = {}
+    for name in chosen:
+        data, lines = SECTIONS[name](args.quick)
+        report.update(data)
+        if not args.json:
+            sys.stdout.write("\n".join(lines) + "\n\n")
+            sys.stdout.flush()
     if args.json:
-        report: dict = {}
-        for section in sections:
-            report.update(section.data)
         json.dump(report, sys.stdout)
         sys.stdout.write("\n")
-    else:
-        for section in sections:
-            sys.stdout.write("\n".join(section.lines) + "\n\n")
     return 0

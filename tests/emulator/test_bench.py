@@ -10,10 +10,14 @@ import sys
 from emulator.scene import bundled_scenes, load_scene
 
 
-def test_bench_json_reports_every_bundled_sensor():
-    result = subprocess.run(
-        [sys.executable, "-m", "emulator.cli", "bench", "--json", "--quick"], capture_output=True, text=True, timeout=300
+def bench(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "emulator.cli", "bench", "--quick", *args], capture_output=True, text=True, timeout=300
     )
+
+
+def test_bench_json_reports_every_bundled_sensor_and_every_section():
+    result = bench("--json")
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)
 
@@ -35,12 +39,19 @@ def test_bench_json_reports_every_bundled_sensor():
         assert row["rays"] > 0 and row["raw_rays_per_s"] > 0 and row["ours_rays_per_s"] > 0
     assert report["ratio"] > 0
     assert report["peak_rss_mb"] > 0
+    # the sections measured through a served daemon
+    assert report["latency"]["pty"]["p99_ms"] > 0 and report["latency"]["tcp"]["p99_ms"] > 0
+    assert report["jitter"]["mean_period_ms"] > 0
+    assert all(row["measured_per_s"] > 0 for row in report["lms_scans_per_s"]["rows"])
 
 
-def test_bench_table_has_every_section():
-    result = subprocess.run(
-        [sys.executable, "-m", "emulator.cli", "bench", "--quick"], capture_output=True, text=True, timeout=300
-    )
+def test_bench_table_shows_only_the_chosen_sections():
+    result = bench("--section", "rays", "--section", "memory")
     assert result.returncode == 0, result.stderr
-    for heading in ("rays:", "scans:", "memory:"):
-        assert any(line.startswith(heading) for line in result.stdout.splitlines()), heading
+    headings = [line.split(":")[0] for line in result.stdout.splitlines() if line and not line.startswith(" ")]
+    assert headings == ["rays", "memory"]
+
+
+def test_unknown_section_is_a_usage_error():
+    result = bench("--section", "warp")
+    assert result.returncode == 2 and "warp" in result.stderr and "Traceback" not in result.stderr
