@@ -22,6 +22,7 @@ from emulator.scene.geometry import shape_mesh, world_mesh
 from emulator.scene.model import MeshFile, Scene
 from emulator.scene.plumes import Particles, particles_at
 
+_PAIRS_PER_CHUNK = 250_000  # beams × particles tested at once (bounds the temporaries' memory)
 
 class World:
     """A scene ready for casting: build once per scene, cast at any time."""
@@ -151,7 +152,16 @@ class World:
         if len(particles) == 0 or len(origins) == 0:
             return first_range, first_density
         centers, half_sizes, density = self._near_beams(particles, origins, directions, beam_end)
-        beam, particle = self._candidate_pairs(origins, directions, beam_end, centers, half_sizes * np.sqrt(3.0))
+        if len(centers) == 0:
+            return first_range, first_density
+        radius = half_sizes * np.sqrt(3.0)
+        step = max(1, _PAIRS_PER_CHUNK // len(origins))
+        pairs = [
+            self._candidate_pairs(origins, directions, beam_end, centers[chunk], radius[chunk])
+            for chunk in (slice(start, start + step) for start in range(0, len(centers), step))
+        ]
+        beam = np.concatenate([chunk_beam for chunk_beam, _ in pairs])
+        particle = np.concatenate([chunk_particle + i * step for i, (_, chunk_particle) in enumerate(pairs)])
         if len(beam) == 0:
             return first_range, first_density
         half = half_sizes[particle, None]
