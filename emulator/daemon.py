@@ -288,11 +288,11 @@ class Daemon:
         self.endpoints.append(endpoint)
         return Ready(spec.name, spec.model, uri, detail)
 
-    async def run(self, on_ready: Callable[[Ready], None]) -> None:
+    async def run(self, on_ready: Callable[[Ready], None] | None = None) -> None:
         """Serve until `stop()`; endpoints are closed (symlinks removed) on the way out."""
         self._stopped = asyncio.Event()
         try:
-            self.start(asyncio.get_running_loop(), on_ready)
+            self.start(asyncio.get_running_loop(), on_ready or (lambda ready: None))
             await self._stopped.wait()
         finally:
             self.close()

@@ -23,6 +23,7 @@ import serial
 
 from emulator.clock import WallClock
 from emulator.daemon import DeviceSession
+from emulator.errors import UserError
 from emulator.transport import PtyAddress, TcpAddress
 from emulator.transport.pty import PtyEndpoint
 from emulator.transport.tcp import TcpEndpoint
@@ -345,6 +346,14 @@ def test_pty_symlink_replaces_a_stale_one_and_is_removed_on_close(loop_thread: L
     assert slave == served.endpoint.slave_name and slave.startswith("/dev/pts/")
     loop_thread.call(served.endpoint.close)
     assert not os.path.lexists(link)
+
+
+def test_pty_path_that_is_not_a_symlink_is_a_user_error_and_is_kept(loop_thread: LoopThread, tmp_path: Path) -> None:
+    precious = tmp_path / "tty0"
+    precious.write_text("not a device")
+    with pytest.raises(UserError, match="exists and is not a symlink"):
+        serve(loop_thread, LineDevice(), "pty", tmp_path)
+    assert precious.read_text() == "not a device"
 
 
 def test_tcp_second_connection_is_refused_while_the_first_is_served(loop_thread: LoopThread, tmp_path: Path) -> None:
