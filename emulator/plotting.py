@@ -27,6 +27,7 @@ from emulator.errors import UserError
 from emulator.optics import World
 from emulator.scene import Scene
 from emulator.sensors import ranges_m
+from emulator.sensors.beam_geometry import scan_plane_rays
 
 SATURATION_CLEAR = 0.8
 SATURATION_PER_DENSITY = math.log(0.8 / 0.14) / 0.0028  # ≈ 622 per density unit
@@ -92,15 +93,6 @@ class SensorSeries:
         return 8.183 if self.unit == "mm" else 81.83
 
 
-def _beam_rays(scene: Scene, sensor_name: str, angles_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """World origins and directions of the beams at `angles_rad` (sensor frame, in its xy-plane)."""
-    pose = scene.sensor(sensor_name).pose
-    local = np.stack([np.cos(angles_rad), np.sin(angles_rad), np.zeros_like(angles_rad)], axis=1)
-    directions = local @ pose.rotation_matrix().T
-    origins = np.broadcast_to(np.asarray(pose.position, dtype=float), directions.shape)
-    return origins, directions
-
-
 def sensor_series(scene: Scene, sensor_name: str, start_s: float, end_s: float) -> SensorSeries:
     """Every scan of the sensor in [start_s, end_s] and the smoke along its beams at each."""
     try:
@@ -118,7 +110,7 @@ def sensor_series(scene: Scene, sensor_name: str, start_s: float, end_s: float) 
     ranges = np.vstack([ranges_m(scan)[columns] for scan in scans])
     is_code = np.isnan(ranges)
     no_return = np.isin(values, NO_RETURN_CODES[spec.model]) & is_code
-    origins, directions = _beam_rays(scene, sensor_name, angles)
+    origins, directions = scan_plane_rays(spec.pose, angles)
     mean_density = np.zeros(len(times))
     plume_range = np.full(values.shape, np.inf)
     for i, time_s in enumerate(times):
