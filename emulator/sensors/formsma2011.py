@@ -1,10 +1,16 @@
 """Preset `formsma2011`: the paper's rule, exactly (SMOKE_MODEL.md §2). Noiseless.
 
 URG-04LX: a beam whose smoke-region optical path before the solid surface
+(or before 5.6 m when nothing solid is in reach: the beam dies in the smoke)
 exceeds the penetration power P = 0.0028 d × 2.5 m = 0.007 d·m (eq. 1, 2), or
 which meets a plume particle before the solid, returns error 1 (low reflected
-intensity); with nothing solid within 5.6 m it returns 0; otherwise the range
+intensity); else with nothing solid within 5.6 m it returns 0; otherwise the range
 in mm (a range that rounds below 20 mm returns 19, non-measurable distance).
+
+The paper's own implementation (§4.3) returns error value 0 when the
+penetration power is used up; SMOKE_MODEL.md §2 asks for 1, which keeps smoke
+apart from 0 ("nothing within range"). Both are valid URG error codes; this
+follows SMOKE_MODEL.md (`urg04lx.LOW_INTENSITY`).
 
 LMS200: smoke regions are transparent; a plume particle met before the solid
 is seen as a solid (its entry range is reported). A range beyond the unit's
