@@ -258,7 +258,7 @@ class Daemon:
         self._device_factory = device_factory
         self._scan_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="scan")
         self._timer: PreciseTimer | None = None
-        self._stopped: asyncio.Event | None = None
+        self._stopped = asyncio.Event()  # set by stop(), even before run() has begun
 
     def start(self, loop: asyncio.AbstractEventLoop, on_ready: Callable[[Ready], None]) -> None:
         """Open every endpoint, calling `on_ready` as each one serves."""
@@ -290,7 +290,6 @@ class Daemon:
 
     async def run(self, on_ready: Callable[[Ready], None] | None = None) -> None:
         """Serve until `stop()`; endpoints are closed (symlinks removed) on the way out."""
-        self._stopped = asyncio.Event()
         try:
             self.start(asyncio.get_running_loop(), on_ready or (lambda ready: None))
             await self._stopped.wait()
@@ -298,8 +297,7 @@ class Daemon:
             self.close()
 
     def stop(self) -> None:
-        if self._stopped is not None:
-            self._stopped.set()
+        self._stopped.set()
 
     def close(self) -> None:
         for session in self.sessions:
