@@ -14,6 +14,7 @@ from emulator.scene import bundled_scenes, load_scene
 from emulator.scene.plumes import particles_at
 from emulator.sensors import create_sensor
 from emulator.serve_process import ServeProcess, free_tcp_port
+from emulator import validation
 from emulator.validation import keyframe_crossings, machine_on_intervals
 
 PENETRATION_POWER = 0.007  # d·m, paper eq. 1
@@ -159,3 +160,22 @@ def test_paper_scene_is_served_by_the_real_daemon(tmp_path: Path, scene_name: st
         assert served.endpoint(sensor, "pty").device.startswith("/dev/pts/")
     assert served.process.returncode == 0
     assert not (tmp_path / "tty").exists()
+
+
+def test_validation_report_is_deterministic_and_states_the_onset(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(validation, "BOCAS_RUN_S", (65.0, 80.0))  # short runs; the onset stays inside
+    monkeypatch.setattr(validation, "MARULAN_RUN_S", (68.0, 72.0))
+    reports = []
+    for name in ("first", "second"):
+        out = tmp_path / name / "validation.md"
+        out.parent.mkdir()
+        validation.write_report(out)
+        figures = sorted((out.parent / "figures").glob("*.png"))
+        reports.append((out.read_bytes(), [figure.read_bytes() for figure in figures], [f.name for f in figures]))
+    assert reports[0] == reports[1]
+    text = reports[0][0].decode()
+    assert "| first scan with an error code (scans every 0.1 s) | – | t = 71.6 s |" in text
+    assert "0.1396 (within 0.14 ± 0.01)" in text
+    assert len(reports[0][2]) == 5
+    for link in ("figures/bocas_fig5_saturation_and_ranges.png", "figures/marulan_fig10_waterfall.png"):
+        assert f"]({link})" in text
