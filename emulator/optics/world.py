@@ -16,13 +16,13 @@ from embreex.mesh_construction import TriangleMesh
 from embreex.rtcore_scene import EmbreeScene
 
 from emulator.errors import SceneError
+from emulator.optics.candidates import candidate_pairs
 from emulator.optics.chords import NO_HIT, paired_slab_intervals, shape_intervals
 from emulator.optics.hits import BeamHits, RegionCrossing
 from emulator.scene.geometry import shape_mesh, world_mesh
 from emulator.scene.model import MeshFile, Scene
 from emulator.scene.plumes import Particles, particles_at
 
-_PAIRS_PER_CHUNK = 250_000  # beams × particles tested at once (bounds the temporaries' memory)
 
 class World:
     """A scene ready for casting: build once per scene, cast at any time."""
@@ -142,9 +142,9 @@ class World:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Entry distance and density of the first particle box before each beam's end.
 
-        Particles outside the beams' bounding box are dropped first; a test
-        of the remaining particles' bounding spheres against every beam picks
-        the candidate pairs; the exact slab test runs on those only.
+        Particles outside the beams' bounding box are dropped first; their
+        bounding spheres pick the candidate pairs (`candidates.py`); the exact
+        slab test runs on those only.
         """
         first_range = np.full(len(origins), np.inf)
         first_density = np.zeros(len(origins))
@@ -154,14 +154,7 @@ class World:
         centers, half_sizes, density = self._near_beams(particles, origins, directions, beam_end)
         if len(centers) == 0:
             return first_range, first_density
-        radius = half_sizes * np.sqrt(3.0)
-        step = max(1, _PAIRS_PER_CHUNK // len(origins))
-        pairs = [
-            self._candidate_pairs(origins, directions, beam_end, centers[chunk], radius[chunk])
-            for chunk in (slice(start, start + step) for start in range(0, len(centers), step))
-        ]
-        beam = np.concatenate([chunk_beam for chunk_beam, _ in pairs])
-        particle = np.concatenate([chunk_particle + i * step for i, (_, chunk_particle) in enumerate(pairs)])
+        beam, particle = candidate_pairs(origins, directions, beam_end, centers, half_sizes * np.sqrt(3.0))
         if len(beam) == 0:
             return first_range, first_density
         half = half_sizes[particle, None]
@@ -178,37 +171,6 @@ class World:
         first_range[beam[first]] = entry[first]
         first_density[beam[first]] = density[particle[first]]
         return first_range, first_density
-
-    @staticmethod
-    def _candidate_pairs(
-        origins: np.ndarray, directions: np.ndarray, beam_end: np.ndarray, centers: np.ndarray, radius: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """(beam, particle) index pairs whose bounding sphere the beam may cross: a superset of the hits."""
-        if np.all(origins == origins[0]):
-            # one scanner: the sphere is hit iff the beam lies in its cone of half-angle asin(r / distance)
-            offset = centers - origins[0]
-            distance = np.sqrt(np.einsum("ij,ij->i", offset, offset))
-            with np.errstate(divide="ignore", invalid="ignore"):
-                cos_limit = np.sqrt(np.clip(1.0 - (radius / distance) ** 2, 0.0, 1.0)) - 1e-9
-                towards = offset / distance[:, None]
-            cos_limit = np.where(distance <= radius, -np.inf, cos_limit)  # origin inside: every beam
-            towards = np.where(distance[:, None] > 0, towards, 0.0)
-            cosine = directions @ towards.T
-            # and the sphere must begin before the beam ends: its centre's distance along the beam − r
-            starts_in_reach = cosine * distance[None, :] - radius[None, :] <= beam_end[:, None]
-            return np.nonzero((cosine >= cos_limit[None, :]) & starts_in_reach)
-        origin_along = np.einsum("ij,ij->i", origins, directions)
-        along = directions @ centers.T - origin_along[:, None]
-        distance_squared = (
-            np.einsum("ij,ij->i", centers, centers)[None, :]
-            - 2.0 * (origins @ centers.T)
-            + np.einsum("ij,ij->i", origins, origins)[:, None]
-        )
-        return np.nonzero(
-            (distance_squared - along * along <= (radius * radius)[None, :] + 1e-9)
-            & (along >= -radius[None, :])
-            & (along <= beam_end[:, None] + radius[None, :])
-        )
 
     @staticmethod
     def _near_beams(

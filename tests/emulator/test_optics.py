@@ -248,20 +248,44 @@ def test_particles_exist_only_once_emitted():
     assert world.cast(o, d, 5.0, 3.0).plume_hit_range_m[0] == pytest.approx(1.8)
 
 
+def brute_force_first_entry(world: World, origins, directions, max_range, time_s):
+    particles = world.particles_at(time_s)
+    half = particles.half_sizes[:, None]
+    entry, exit_ = slab_intervals(origins, directions, particles.centers - half, particles.centers + half)
+    entry = np.maximum(entry, 0.0)
+    return np.where((exit_ >= entry) & (entry < max_range), entry, np.inf).min(axis=1)
+
+
 def test_many_particles_match_a_brute_force_first_entry():
-    """10 000 particles (tested in chunks) and beams from two origins: the first entry per beam
-    equals a plain minimum over every particle box."""
+    """10 000 particles, beams from one origin (a fan) and from many origins (chunked general
+    test): the first entry per beam equals a plain minimum over every particle box."""
     fire = Plume("fire", (3.0, 0.0, 0.0), 2000.0, 5.0, 0.05, 0.02, (0.0, 0.0, 0.05), 0.4, (0.0, 0.1, 0.0), 0.05)
     world = World(scene(plumes=[fire], seed=9))
+    assert len(world.particles_at(5.0)) == 10_000
     angles = np.radians(np.linspace(-30, 30, 361))
     directions = np.stack([np.cos(angles), np.sin(angles), np.zeros_like(angles)], axis=1)
-    for origins in (np.zeros((361, 3)), np.column_stack([np.zeros(361), np.linspace(-0.5, 0.5, 361), np.zeros(361)])):
-        hits = world.cast(origins, directions, 10.0, 5.0)
-        particles = world.particles_at(5.0)
-        assert len(particles) == 10_000
-        half = particles.half_sizes[:, None]
-        entry, exit_ = slab_intervals(origins, directions, particles.centers - half, particles.centers + half)
-        entry = np.maximum(entry, 0.0)
-        expected = np.where((exit_ >= entry) & (entry < 10.0), entry, np.inf).min(axis=1)
+    spread_origins = np.column_stack([np.zeros(361), np.linspace(-0.5, 0.5, 361), np.zeros(361)])
+    for origins in (np.zeros((361, 3)), spread_origins):
+        expected = brute_force_first_entry(world, origins, directions, 10.0, 5.0)
         assert np.isfinite(expected).sum() > 100
-        np.testing.assert_array_equal(hits.plume_hit_range_m, expected)
+        np.testing.assert_array_equal(world.cast(origins, directions, 10.0, 5.0).plume_hit_range_m, expected)
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    roll=st.floats(-180, 180), pitch=st.floats(-90, 90), yaw=st.floats(-180, 180),
+    seed=st.integers(0, 2**32 - 1), beams=st.integers(2, 1024),
+)
+def test_a_tilted_full_circle_fan_finds_every_particle(roll, pitch, yaw, seed, beams):
+    """Beams all around a tilted plane (the fan search wraps around ±180°) against particles
+    scattered around and across the origin, compared with the brute-force minimum."""
+    cloud = Plume("cloud", (0.0, 0.0, 0.0), 400.0, 5.0, 0.05, 0.05, (0.0, 0.0, 0.0), 0.8, (0.0, 0.0, 0.0), 0.05)
+    world = World(scene(plumes=[cloud], seed=seed))
+    angles = np.linspace(-np.pi, np.pi, beams, endpoint=False)
+    local = np.stack([np.cos(angles), np.sin(angles), np.zeros_like(angles)], axis=1)
+    directions = local @ Pose((0, 0, 0), (roll, pitch, yaw)).rotation_matrix().T
+    origins = np.tile([0.6, -0.3, 0.02], (beams, 1))
+    expected = brute_force_first_entry(world, origins, directions, 8.0, 5.0)
+    np.testing.assert_array_equal(world.cast(origins, directions, 8.0, 5.0).plume_hit_range_m, expected)
+    if beams >= 256 and not np.all(expected == 0.0):  # unless the origin is in a box: particles and open air
+        assert np.any((expected > 0) & np.isfinite(expected)) and np.any(np.isinf(expected))

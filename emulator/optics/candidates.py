@@ -1,0 +1,97 @@
+"""Which beam–particle pairs can meet: a cheap superset for the exact slab test.
+
+Each particle's cube is bounded by a sphere (radius = half edge × √3). A
+scanner's beams share one origin and lie in one plane (a fan): a sphere then
+covers one interval of beam angles, found by binary search over the sorted
+angles, so the cost grows with beams + particles + pairs. Other beam sets use
+a test of every beam against every sphere, in chunks of bounded size.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+PAIRS_PER_CHUNK = 250_000  # beams × particles tested at once by the general test (bounds temporaries)
+_COPLANAR = 1e-9  # |d·n| below this: the beams lie in one plane
+_ANGLE_MARGIN = 1e-9  # radians added to each side of a sphere's interval (rounding; the slab test decides)
+
+
+def candidate_pairs(
+    origins: np.ndarray, directions: np.ndarray, beam_end: np.ndarray, centers: np.ndarray, radius: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(beam, particle) index arrays: every pair whose bounding sphere the beam may cross before its end."""
+    if len(origins) == 0 or len(centers) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    if np.all(origins == origins[0]):
+        normal = _fan_normal(directions)
+        if normal is not None:
+            return _fan_pairs(origins[0], directions, normal, centers, radius)
+    step = max(1, PAIRS_PER_CHUNK // len(origins))
+    beams, particles = [], []
+    for start in range(0, len(centers), step):
+        beam, particle = _sphere_pairs(origins, directions, beam_end, centers[start : start + step], radius[start : start + step])
+        beams.append(beam)
+        particles.append(particle + start)
+    return np.concatenate(beams), np.concatenate(particles)
+
+
+def _fan_normal(directions: np.ndarray) -> np.ndarray | None:
+    """The unit normal of the plane holding every direction, or None if they span space (or a line)."""
+    crosses = np.cross(directions[0], directions)
+    widest = int(np.argmax(np.einsum("ij,ij->i", crosses, crosses)))
+    length = np.linalg.norm(crosses[widest])
+    if length < 1e-6:
+        return None
+    normal = crosses[widest] / length
+    return normal if np.abs(directions @ normal).max() <= _COPLANAR else None
+
+
+def _fan_pairs(
+    origin: np.ndarray, directions: np.ndarray, normal: np.ndarray, centers: np.ndarray, radius: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Beams from one origin in one plane: each sphere's circle in that plane covers an interval of angles."""
+    first = directions[0]
+    second = np.cross(normal, first)
+    beam_angle = np.arctan2(directions @ second, directions @ first)
+    order = np.argsort(beam_angle, kind="stable")
+    count = len(order)
+    # the sorted angles three times (−2π, 0, +2π) so an interval that wraps around ±π is one slice
+    angles = np.concatenate([beam_angle[order] - 2 * np.pi, beam_angle[order], beam_angle[order] + 2 * np.pi])
+
+    offset = centers - origin
+    height = offset @ normal
+    circle_squared = radius * radius - height * height  # the sphere's circle in the beams' plane
+    in_plane = offset - height[:, None] * normal
+    distance = np.sqrt(np.einsum("ij,ij->i", in_plane, in_plane))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        half_width = np.arcsin(np.clip(np.sqrt(np.maximum(circle_squared, 0.0)) / distance, 0.0, 1.0))
+    centre_angle = np.arctan2(in_plane @ second, in_plane @ first)
+    low = np.searchsorted(angles, centre_angle - half_width - _ANGLE_MARGIN, side="left")
+    high = np.searchsorted(angles, centre_angle + half_width + _ANGLE_MARGIN, side="right")
+    surrounds_origin = distance * distance <= circle_squared
+    low = np.where(surrounds_origin, count, low)  # the origin is inside the circle: every beam
+    high = np.where(surrounds_origin, 2 * count, high)
+    counts = np.where(circle_squared >= 0.0, high - low, 0)
+
+    particle = np.repeat(np.arange(len(centers)), counts)
+    starts = np.repeat(low - (np.cumsum(counts) - counts), counts)
+    position = starts + np.arange(len(particle))
+    return order[position % count], particle
+
+
+def _sphere_pairs(
+    origins: np.ndarray, directions: np.ndarray, beam_end: np.ndarray, centers: np.ndarray, radius: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every beam against every sphere: the perpendicular distance and the extent along the beam."""
+    origin_along = np.einsum("ij,ij->i", origins, directions)
+    along = directions @ centers.T - origin_along[:, None]
+    distance_squared = (
+        np.einsum("ij,ij->i", centers, centers)[None, :]
+        - 2.0 * (origins @ centers.T)
+        + np.einsum("ij,ij->i", origins, origins)[:, None]
+    )
+    return np.nonzero(
+        (distance_squared - along * along <= (radius * radius)[None, :] + 1e-9)
+        & (along >= -radius[None, :])
+        & (along <= beam_end[:, None] + radius[None, :])
+    )
