@@ -46,6 +46,7 @@ class LmsSensor:
         key = (start_deg, step_deg, count)
         if key not in self._rays:
             angles_rad = np.radians(device_angles_deg(start_deg, step_deg, count) - 90.0)
+            angles_rad.flags.writeable = False
             self._rays[key] = (angles_rad, *scan_plane_rays(self.spec.pose, angles_rad))
         return self._rays[key]
 

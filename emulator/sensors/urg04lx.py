@@ -34,8 +34,10 @@ OUTSIDE_VALID_AREA = NO_ECHO
 
 
 def step_angles_rad() -> np.ndarray:
-    """Sensor-frame angle of every step 0..768."""
-    return (np.arange(STEPS) - FRONT_STEP) * (2.0 * np.pi / STEPS_PER_REVOLUTION)
+    """Sensor-frame angle of every step 0..768 (read-only: shared by every scan)."""
+    angles = (np.arange(STEPS) - FRONT_STEP) * (2.0 * np.pi / STEPS_PER_REVOLUTION)
+    angles.flags.writeable = False
+    return angles
 
 
 class UrgSensor:
