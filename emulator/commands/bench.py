@@ -31,16 +31,14 @@ from typing import Callable
 
 import numpy as np
 
-from emulator.commands.scan import lms_scan_window
 from emulator.optics import World
 from emulator.scene import bundled_scenes, load_scene
 from emulator.scene.model import Scene, SensorSpec
-from emulator.sensors import LmsSensor, create_sensor, lms200, urg04lx
+from emulator.sensors import create_sensor, lms200, urg04lx
 from emulator.sensors.beam_geometry import scan_plane_rays
 
 SCANS_PER_BATCH = 16
 SCAN_REPEATS = 3  # each instant is timed this often and the fastest kept
-LMS_REVOLUTIONS = {1.0: 1, 0.5: 2, 0.25: 4}
 
 
 Section = tuple[dict, list[str]]
@@ -65,7 +63,7 @@ def _sensor_beams(spec: SensorSpec) -> tuple[np.ndarray, np.ndarray, float]:
         angles = urg04lx.step_angles_rad()[urg04lx.FIRST_VALID_STEP : urg04lx.LAST_VALID_STEP + 1]
         origins, directions = scan_plane_rays(spec.pose, angles)
         return origins, directions, urg04lx.MAX_RANGE_M
-    window = lms_scan_window(dict(spec.options))
+    window = lms200.configured_window(spec.options)
     angles = np.radians(lms200.device_angles_deg(window["start_deg"], window["step_deg"], window["count"]) - 90.0)
     origins, directions = scan_plane_rays(spec.pose, angles)
     return origins, directions, lms200.REACH_M
@@ -114,20 +112,6 @@ def rays_section(quick: bool) -> Section:
     return {"ratio": ratio, "rays": rows}, lines
 
 
-def _scan_once(sensor, time_s: float) -> None:
-    if isinstance(sensor, LmsSensor):
-        sensor.scan(time_s, **lms_scan_window(dict(sensor.spec.options)))
-    else:
-        sensor.scan(time_s)
-
-
-def _period_ms(spec: SensorSpec) -> float:
-    if spec.model == urg04lx.MODEL:
-        return urg04lx.PERIOD_S * 1000.0
-    revolutions = LMS_REVOLUTIONS[float(spec.options.get("resolution_deg", 0.5))]
-    return revolutions * lms200.PERIOD_S * 1000.0
-
-
 def scans_section(quick: bool) -> Section:
     """Compute time of scans spread over the first minute of each scene (smoke on): per instant
     the fastest of SCAN_REPEATS, so other load on the machine does not count; mean and max over instants."""
@@ -137,10 +121,10 @@ def scans_section(quick: bool) -> Section:
         world = World(scene)
         for spec in scene.sensors:
             sensor = create_sensor(scene, spec.name, world)
-            _scan_once(sensor, 0.0)  # first call pays one-off set-up
-            durations = [_best_seconds(lambda: _scan_once(sensor, float(time_s)), SCAN_REPEATS) for time_s in times]
+            sensor.configured_scan(0.0)  # the first call pays one-off set-up
+            durations = [_best_seconds(lambda: sensor.configured_scan(float(t)), SCAN_REPEATS) for t in times]
             scan_ms = float(np.mean(durations)) * 1000.0
-            period_ms = _period_ms(spec)
+            period_ms = sensor.configured_period_s * 1000.0
             rows.append({
                 "scene": scene.path.stem if scene.path else scene.name,
                 "sensor": spec.name,

@@ -15,7 +15,7 @@ import sys
 import numpy as np
 
 from emulator.scene import load_scene
-from emulator.sensors import LmsSensor, Scan, create_sensor, ranges_m
+from emulator.sensors import Scan, create_sensor, ranges_m
 
 
 ANGLE_DECIMALS = 9  # the devices' angles are exact in far fewer digits; drop float noise
@@ -26,18 +26,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sensor", required=True, metavar="NAME", help="the scene's sensor to scan with")
     parser.add_argument("--time", type=float, default=0.0, metavar="T", help="simulated time in seconds (default 0)")
     parser.add_argument("--seed", type=int, default=None, metavar="N", help="override the scene's seed")
-
-
-def lms_scan_window(options: dict) -> dict:
-    """start_deg, step_deg, count and unit of the scan an LMS200 with these options sends."""
-    angle = float(options.get("angle_deg", 180))
-    step = float(options.get("resolution_deg", 0.5))
-    return {
-        "start_deg": (180.0 - angle) / 2.0,
-        "step_deg": step,
-        "count": int(round(angle / step)) + 1,
-        "unit": options.get("units", "mm"),
-    }
 
 
 def scan_json(scan: Scan) -> dict:
@@ -57,11 +45,7 @@ def run(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene)
     if args.seed is not None:
         scene = dataclasses.replace(scene, seed=args.seed)
-    sensor = create_sensor(scene, args.sensor)
-    if isinstance(sensor, LmsSensor):
-        scan = sensor.scan(args.time, **lms_scan_window(dict(sensor.spec.options)))
-    else:
-        scan = sensor.scan(args.time)
+    scan = create_sensor(scene, args.sensor).configured_scan(args.time)
     json.dump(scan_json(scan), sys.stdout)
     sys.stdout.write("\n")
     return 0

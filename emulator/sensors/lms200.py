@@ -9,6 +9,8 @@ echo within the sensor's physical reach (80 m) (telegram listing §10.8).
 
 from __future__ import annotations
 
+from typing import Any, Mapping
+
 import numpy as np
 
 from emulator.optics import World
@@ -21,12 +23,26 @@ MODEL = "lms200"
 PERIOD_S = 1.0 / 75.0  # one mirror revolution
 REACH_M = 80.0
 UNITS_PER_M = {"mm": 1000.0, "cm": 100.0}
+REVOLUTIONS_PER_SCAN = {1.0: 1, 0.5: 2, 0.25: 4}  # interlaced: each revolution measures a 1° grid
 ABOVE_MAXIMUM = 8183
 NO_ECHO = 8191
 
 
 def device_angles_deg(start_deg: float, step_deg: float, count: int) -> np.ndarray:
     return start_deg + step_deg * np.arange(count)
+
+
+def configured_window(options: Mapping[str, Any]) -> dict[str, Any]:
+    """The `scan` keywords for the scan the scene's options select (angle_deg, resolution_deg,
+    units): e.g. 100° at 1° → device angles 40°..140°, 101 values."""
+    angle = float(options.get("angle_deg", 180))
+    step = float(options.get("resolution_deg", 0.5))
+    return {
+        "start_deg": (180.0 - angle) / 2.0,
+        "step_deg": step,
+        "count": int(round(angle / step)) + 1,
+        "unit": str(options.get("units", "mm")),
+    }
 
 
 class LmsSensor:
@@ -61,6 +77,16 @@ class LmsSensor:
         beams = Beams(self.scene, self.spec, self.world, time_s, angles_rad, origins, directions)
         values = np.asarray(self._response.lms_values(hits, beams, unit), dtype=np.int64)
         return Scan(self.name, MODEL, time_s, angles_rad, values, unit)
+
+    def configured_scan(self, time_s: float) -> Scan:
+        """The scan the scene's options select (`configured_window`), at `time_s`."""
+        return self.scan(time_s, **configured_window(self.spec.options))
+
+    @property
+    def configured_period_s(self) -> float:
+        """Time the mirror needs for that scan: 1, 2 or 4 revolutions at 1°, 0.5°, 0.25°."""
+        step = configured_window(self.spec.options)["step_deg"]
+        return REVOLUTIONS_PER_SCAN[step] * PERIOD_S
 
 
 def ranges_m(values: np.ndarray, unit: str) -> np.ndarray:

@@ -63,6 +63,12 @@ class UrgSensor:
         values[self._valid] = self._response.urg_values(hits, beams)
         return Scan(self.name, MODEL, time_s, self.angles_rad, values, "mm")
 
+    def configured_scan(self, time_s: float) -> Scan:
+        """The same as `scan`: the URG-04LX has one scan (its window is chosen by the protocol)."""
+        return self.scan(time_s)
+
+    configured_period_s = PERIOD_S
+
 
 def ranges_m(values: np.ndarray) -> np.ndarray:
     """Metres per value, NaN for error codes."""

@@ -208,3 +208,18 @@ def test_unknown_sensor_names_the_known_ones():
 def test_unknown_response_model_is_a_user_error():
     with pytest.raises(UserError, match="unknown smoke model 'fancy'"):
         create_sensor(dataclasses.replace(scene(), model="fancy"), "urg")
+
+
+def test_configured_scan_follows_the_scene_options():
+    base = scene([wall(3.0)])
+    narrow = dataclasses.replace(
+        base, sensors=(SensorSpec("lms", "lms200", Pose(), (), {"angle_deg": 100, "resolution_deg": 0.25, "units": "cm"}),)
+    )
+    lms = create_sensor(narrow, "lms")
+    scan = lms.configured_scan(0.0)
+    assert len(scan.values) == 401 and scan.unit == "cm" and scan.values[200] == 300
+    assert np.degrees(scan.angles_rad[0]) == pytest.approx(-50.0) and np.degrees(scan.angles_rad[-1]) == pytest.approx(50.0)
+    assert lms.configured_period_s == pytest.approx(4 / 75)
+    urg = create_sensor(base, "urg")
+    np.testing.assert_array_equal(urg.configured_scan(0.0).values, urg.scan(0.0).values)
+    assert urg.configured_period_s == 0.1
