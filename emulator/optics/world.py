@@ -19,7 +19,7 @@ from emulator.errors import SceneError
 from emulator.optics.candidates import candidate_pairs
 from emulator.optics.chords import NO_HIT, paired_slab_intervals, shape_intervals
 from emulator.optics.hits import BeamHits, RegionCrossing
-from emulator.scene.geometry import shape_mesh, world_mesh
+from emulator.scene.geometry import shape_mesh, world_mesh, world_to_local
 from emulator.scene.model import MeshFile, Scene
 from emulator.scene.plumes import Particles, particles_at
 
@@ -44,7 +44,6 @@ class World:
         if len(triangles):
             self._embree = EmbreeScene()
             TriangleMesh(self._embree, triangles.astype(np.float32))
-        self._region_rotations = [region.pose.rotation_matrix() for region in scene.regions]
         self._region_meshes: dict[int, trimesh.Trimesh] = {
             i: shape_mesh(region.shape) for i, region in enumerate(scene.regions) if isinstance(region.shape, MeshFile)
         }
@@ -123,9 +122,7 @@ class World:
         self, index: int, origins: np.ndarray, directions: np.ndarray, max_range_m: float, time_s: float
     ) -> RegionCrossing:
         region = self.scene.regions[index]
-        rotation = self._region_rotations[index]
-        local_origins = (origins - np.asarray(region.pose.position)) @ rotation
-        local_directions = directions @ rotation
+        local_origins, local_directions = world_to_local(region.pose, origins, directions)
         entry, exit_ = shape_intervals(region.shape, local_origins, local_directions, self._region_meshes.get(index))
         entry = np.maximum(entry, 0.0)
         exit_ = np.minimum(exit_, max_range_m)
