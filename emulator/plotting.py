@@ -26,7 +26,7 @@ from emulator.commands.record import scan_series, scan_times
 from emulator.errors import UserError
 from emulator.optics import World
 from emulator.scene import Scene
-from emulator.sensors import ranges_m
+from emulator.sensors import create_sensor, ranges_m
 from emulator.sensors.beam_geometry import scan_plane_rays
 
 SATURATION_CLEAR = 0.8
@@ -95,15 +95,13 @@ class SensorSeries:
 
 def sensor_series(scene: Scene, sensor_name: str, start_s: float, end_s: float) -> SensorSeries:
     """Every scan of the sensor in [start_s, end_s] and the smoke along its beams at each."""
-    try:
-        spec = scene.sensor(sensor_name)
-    except KeyError as error:
-        raise UserError(error.args[0]) from None
-    times = scan_times(spec, start_s, end_s)
+    world = World(scene)
+    sensor = create_sensor(scene, sensor_name, world=world)
+    spec = scene.sensor(sensor_name)
+    times = scan_times(sensor.configured_period_s, start_s, end_s)
     if len(times) < 2:
         raise UserError(f"--start {start_s} to --end {end_s} holds fewer than two scans of {sensor_name}")
-    world = World(scene)
-    scans = list(scan_series(scene, sensor_name, times, world=world))
+    scans = list(scan_series(sensor, times))
     columns = URG_VALID_STEPS if spec.model == "urg-04lx" else slice(None)
     angles = np.asarray(scans[0].angles_rad)[columns]
     values = np.vstack([np.asarray(scan.values)[columns] for scan in scans]).astype(np.int64)

@@ -1,15 +1,17 @@
 """`lrf-emulator record SCENE --sensor NAME --start T0 --end T1 --out FILE` (CLI.md).
 
 Writes one log line per scan (emulator/logfile.py) at the sensor's scan
-period: the URG-04LX every 0.1 s; the LMS200 every full scan of its configured
-resolution, i.e. the mirror revolutions that scan needs (1°: 1/75 s,
-0.5°: 2/75 s, 0.25°: 4/75 s), with the scene's angle, resolution and units.
+period, as the scene configures it (`configured_scan`, `configured_period_s`):
+the URG-04LX every 0.1 s; the LMS200 every full scan of its resolution, i.e.
+the mirror revolutions that scan needs (1°: 1/75 s, 0.5°: 2/75 s,
+0.25°: 4/75 s), with the scene's angle, resolution and units.
 Scan k is taken at t = k · period, for every k with T0 ≤ t ≤ T1.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import math
 from pathlib import Path
 from typing import Iterator
@@ -18,15 +20,10 @@ import numpy as np
 
 from emulator.errors import UserError
 from emulator.logfile import LogHeader, write_log
-from emulator.optics import World
+from emulator.scene import load_scene
+from emulator.sensors import Sensor, create_sensor
 from emulator.sensors.physical import apply_model_override
-from emulator.scene import Scene, load_scene
-from emulator.scene.model import SensorSpec
-from emulator.sensors import create_sensor
 from emulator.sensors.scan import Scan
-
-LMS_REVOLUTION_S = 1.0 / 75.0
-LMS_REVOLUTIONS_PER_SCAN = {1.0: 1, 0.5: 2, 0.25: 4}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -40,58 +37,33 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, type=Path, metavar="FILE", help="log file to write")
 
 
-def scan_period_s(spec: SensorSpec) -> float:
-    """Seconds between two complete scans of the sensor as configured in the scene."""
-    if spec.model == "lms200":
-        return LMS_REVOLUTIONS_PER_SCAN[float(spec.options.get("resolution_deg", 0.5))] * LMS_REVOLUTION_S
-    return 0.1
-
-
-def scan_times(spec: SensorSpec, start_s: float, end_s: float) -> np.ndarray:
-    """The scan completion times k · period within [start_s, end_s]."""
+def scan_times(period_s: float, start_s: float, end_s: float) -> np.ndarray:
+    """The scan completion times k · period_s within [start_s, end_s]."""
     if not (math.isfinite(start_s) and math.isfinite(end_s)) or start_s < 0 or end_s < start_s:
         raise UserError(f"need 0 <= --start <= --end, got {start_s} and {end_s}")
-    period = scan_period_s(spec)
-    first = math.ceil(start_s / period - 1e-9)
-    last = math.floor(end_s / period + 1e-9)
-    return np.arange(first, last + 1) * period
+    first = math.ceil(start_s / period_s - 1e-9)
+    last = math.floor(end_s / period_s + 1e-9)
+    return np.arange(first, last + 1) * period_s
 
 
-def scan_series(scene: Scene, sensor_name: str, times_s: np.ndarray, world: World | None = None) -> Iterator[Scan]:
-    """The sensor's scans at `times_s`, as the device would put them on the wire."""
-    spec = _sensor_spec(scene, sensor_name)
-    sensor = create_sensor(scene, sensor_name, world=world)
-    if spec.model == "lms200":
-        angle = float(spec.options.get("angle_deg", 180))
-        step = float(spec.options.get("resolution_deg", 0.5))
-        window = dict(
-            start_deg=(180.0 - angle) / 2.0, step_deg=step,
-            count=int(round(angle / step)) + 1, unit=str(spec.options.get("units", "mm")),
-        )
-        for time_s in times_s:
-            yield sensor.scan(float(time_s), **window)
-    else:
-        for time_s in times_s:
-            yield sensor.scan(float(time_s))
-
-
-def _sensor_spec(scene: Scene, sensor_name: str) -> SensorSpec:
-    try:
-        return scene.sensor(sensor_name)
-    except KeyError as error:
-        raise UserError(error.args[0]) from None
+def scan_series(sensor: Sensor, times_s: np.ndarray) -> Iterator[Scan]:
+    """The sensor's configured scans at `times_s`, as the device would put them on the wire."""
+    for time_s in times_s:
+        yield sensor.configured_scan(float(time_s))
 
 
 def run(args: argparse.Namespace) -> int:
     scene = apply_model_override(load_scene(args.scene), args.model)
-    spec = _sensor_spec(scene, args.sensor)
-    times = scan_times(spec, args.start, args.end)
-    scans = scan_series(scene, args.sensor, times)
-    unit = str(spec.options.get("units", "mm")) if spec.model == "lms200" else "mm"
+    sensor = create_sensor(scene, args.sensor)
+    scans = scan_series(sensor, scan_times(sensor.configured_period_s, args.start, args.end))
+    first = next(scans, None)
+    if first is None:
+        raise UserError(f"no scan of {sensor.name} completes between {args.start} and {args.end} s")
     try:
         with args.out.open("w", encoding="ascii") as out:
-            count = write_log(out, scans, LogHeader(spec.name, spec.model, unit))
+            header = LogHeader(sensor.name, sensor.model, first.unit)
+            count = write_log(out, itertools.chain([first], scans), header)
     except OSError as error:
         raise UserError(f"cannot write {args.out}: {error.strerror}") from None
-    print(f"recorded {count} scans of {spec.name} ({spec.model}) to {args.out}")
+    print(f"recorded {count} scans of {sensor.name} ({sensor.model}) to {args.out}")
     return 0
