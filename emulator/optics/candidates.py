@@ -3,8 +3,9 @@
 Each particle's cube is bounded by a sphere (radius = half edge × √3). A
 scanner's beams share one origin and lie in one plane (a fan): a sphere then
 covers one interval of beam angles, found by binary search over the sorted
-angles, so the cost grows with beams + particles + pairs. Other beam sets use
-a test of every beam against every sphere, in chunks of bounded size.
+angles, so the cost grows with beams + particles + pairs. Other beam sets test
+every sphere against every beam, in chunks of bounded size. Either way only
+particles touching the bounding box of all beam segments take part.
 """
 
 from __future__ import annotations
@@ -20,19 +21,33 @@ def candidate_pairs(
     origins: np.ndarray, directions: np.ndarray, beam_end: np.ndarray, centers: np.ndarray, radius: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """(beam, particle) index arrays: every pair whose bounding sphere the beam may cross before its end."""
+    nothing = np.zeros(0, dtype=np.int64)
     if len(origins) == 0 or len(centers) == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        return nothing, nothing
+    near = np.flatnonzero(_touches_beam_box(origins, directions, beam_end, centers, radius))
     if np.all(origins == origins[0]):
         normal = _fan_normal(directions)
         if normal is not None:
-            return _fan_pairs(origins[0], directions, normal, centers, radius)
+            beam, particle = _fan_pairs(origins[0], directions, beam_end, normal, centers[near], radius[near])
+            return beam, near[particle]
     step = max(1, PAIRS_PER_CHUNK // len(origins))
-    beams, particles = [], []
-    for start in range(0, len(centers), step):
-        beam, particle = _sphere_pairs(origins, directions, beam_end, centers[start : start + step], radius[start : start + step])
+    beams, particles = [nothing], [nothing]
+    for start in range(0, len(near), step):
+        chunk = near[start : start + step]
+        beam, particle = _sphere_pairs(origins, directions, beam_end, centers[chunk], radius[chunk])
         beams.append(beam)
-        particles.append(particle + start)
+        particles.append(chunk[particle])
     return np.concatenate(beams), np.concatenate(particles)
+
+
+def _touches_beam_box(
+    origins: np.ndarray, directions: np.ndarray, beam_end: np.ndarray, centers: np.ndarray, radius: np.ndarray
+) -> np.ndarray:
+    """Mask of the spheres whose bounding cube touches the bounding box of all beam segments."""
+    ends = origins + directions * beam_end[:, None]
+    lower = np.minimum(origins.min(axis=0), ends.min(axis=0))
+    upper = np.maximum(origins.max(axis=0), ends.max(axis=0))
+    return np.all((centers + radius[:, None] >= lower) & (centers - radius[:, None] <= upper), axis=1)
 
 
 def _fan_normal(directions: np.ndarray) -> np.ndarray | None:
@@ -47,9 +62,15 @@ def _fan_normal(directions: np.ndarray) -> np.ndarray | None:
 
 
 def _fan_pairs(
-    origin: np.ndarray, directions: np.ndarray, normal: np.ndarray, centers: np.ndarray, radius: np.ndarray
+    origin: np.ndarray,
+    directions: np.ndarray,
+    beam_end: np.ndarray,
+    normal: np.ndarray,
+    centers: np.ndarray,
+    radius: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Beams from one origin in one plane: each sphere's circle in that plane covers an interval of angles."""
+    """Beams from one origin in one plane: each sphere's circle in that plane covers an interval of
+    angles; of those pairs, the ones whose sphere starts before the beam's end."""
     first = directions[0]
     second = np.cross(normal, first)
     beam_angle = np.arctan2(directions @ second, directions @ first)
@@ -76,7 +97,10 @@ def _fan_pairs(
     particle = np.repeat(np.arange(len(centers)), counts)
     starts = np.repeat(low - (np.cumsum(counts) - counts), counts)
     position = starts + np.arange(len(particle))
-    return order[position % count], particle
+    beam = order[position % count]
+    along = np.einsum("ij,ij->i", offset[particle], directions[beam])
+    in_reach = along - radius[particle] <= beam_end[beam]
+    return beam[in_reach], particle[in_reach]
 
 
 def _sphere_pairs(

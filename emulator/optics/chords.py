@@ -59,11 +59,28 @@ def slab_intervals(
     return _empty_where(*_slab(origins[:, None, :], directions[:, None, :], lower[None], upper[None]))
 
 
-def paired_slab_intervals(
-    origins: np.ndarray, directions: np.ndarray, lower: np.ndarray, upper: np.ndarray
+def paired_cube_intervals(
+    origins: np.ndarray, directions: np.ndarray, centers: np.ndarray, half_sizes: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Entry and exit of ray k (K, 3) through box k (K, 3) → (K,)."""
-    return _empty_where(*_slab(origins, directions, lower, upper))
+    """Entry and exit of ray k (K, 3) through the axis-aligned cube k (centre (K, 3), half edge (K,)) → (K,).
+
+    The slab test with few array operations (it runs on every candidate pair):
+    an axis the ray runs parallel to gives NaN or ±inf bounds, which the
+    NaN-ignoring reductions skip; such a ray misses when its origin lies
+    outside that axis's slab.
+    """
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        inverse = 1.0 / directions
+        offset = centers - origins
+        middle = offset * inverse
+        spread = half_sizes[:, None] * np.abs(inverse)
+        near = np.fmax.reduce(middle - spread, axis=1)
+        far = np.fmin.reduce(middle + spread, axis=1)
+    parallel = directions == 0.0
+    if parallel.any():
+        outside = (parallel & (np.abs(offset) > half_sizes[:, None])).any(axis=1)
+        near = np.where(outside, np.inf, near)
+    return _empty_where(near, far)
 
 
 def box_intervals(shape: Box, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -17,7 +17,7 @@ from embreex.rtcore_scene import EmbreeScene
 
 from emulator.errors import SceneError
 from emulator.optics.candidates import candidate_pairs
-from emulator.optics.chords import NO_HIT, paired_slab_intervals, shape_intervals
+from emulator.optics.chords import NO_HIT, paired_cube_intervals, shape_intervals
 from emulator.optics.hits import BeamHits, RegionCrossing
 from emulator.scene.geometry import shape_mesh, world_mesh, world_to_local
 from emulator.scene.model import MeshFile, Scene
@@ -139,44 +139,24 @@ class World:
     ) -> tuple[np.ndarray, np.ndarray]:
         """Entry distance and density of the first particle box before each beam's end.
 
-        Particles outside the beams' bounding box are dropped first; their
-        bounding spheres pick the candidate pairs (`candidates.py`); the exact
-        slab test runs on those only.
+        The particles' bounding spheres pick candidate pairs (`candidates.py`);
+        the exact slab test runs on those only.
         """
         first_range = np.full(len(origins), np.inf)
         first_density = np.zeros(len(origins))
         particles = self.particles_at(time_s)
         if len(particles) == 0 or len(origins) == 0:
             return first_range, first_density
-        centers, half_sizes, density = self._near_beams(particles, origins, directions, beam_end)
-        if len(centers) == 0:
-            return first_range, first_density
-        beam, particle = candidate_pairs(origins, directions, beam_end, centers, half_sizes * np.sqrt(3.0))
-        if len(beam) == 0:
-            return first_range, first_density
-        half = half_sizes[particle, None]
-        entry, exit_ = paired_slab_intervals(
-            origins[beam], directions[beam], centers[particle] - half, centers[particle] + half
+        beam, particle = candidate_pairs(
+            origins, directions, beam_end, particles.centers, particles.half_sizes * np.sqrt(3.0)
+        )
+        entry, exit_ = paired_cube_intervals(
+            origins[beam], directions[beam], particles.centers[particle], particles.half_sizes[particle]
         )
         entry = np.maximum(entry, 0.0)
         met = (exit_ >= entry) & (entry < beam_end[beam])
         beam, particle, entry = beam[met], particle[met], entry[met]
-        order = np.lexsort((entry, beam))
-        beam, particle, entry = beam[order], particle[order], entry[order]
-        first = np.ones(len(beam), dtype=bool)
-        first[1:] = beam[1:] != beam[:-1]
-        first_range[beam[first]] = entry[first]
-        first_density[beam[first]] = density[particle[first]]
+        np.minimum.at(first_range, beam, entry)
+        first = entry == first_range[beam]  # each beam's first particle (of a tie, the last listed)
+        first_density[beam[first]] = particles.density[particle[first]]
         return first_range, first_density
-
-    @staticmethod
-    def _near_beams(
-        particles: Particles, origins: np.ndarray, directions: np.ndarray, beam_end: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Centres, half sizes and densities of the particles whose box touches the beams' bounding box."""
-        ends = origins + directions * beam_end[:, None]
-        reach_lower = np.minimum(origins.min(axis=0), ends.min(axis=0))
-        reach_upper = np.maximum(origins.max(axis=0), ends.max(axis=0))
-        half = particles.half_sizes[:, None]
-        near = np.all((particles.centers + half >= reach_lower) & (particles.centers - half <= reach_upper), axis=1)
-        return particles.centers[near], particles.half_sizes[near], particles.density[near]

@@ -20,6 +20,7 @@ whenever the particle is evaluated and needs no per-particle state.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,8 +52,8 @@ class Particles:
 
     @staticmethod
     def concatenate(parts: list[Particles]) -> Particles:
-        if not parts:
-            return Particles.empty()
+        if len(parts) <= 1:
+            return parts[0] if parts else Particles.empty()
         return Particles(
             np.concatenate([p.centers for p in parts]),
             np.concatenate([p.half_sizes for p in parts]),
@@ -70,6 +71,7 @@ def splitmix64(counters: np.ndarray) -> np.ndarray:
     return z ^ (z >> np.uint64(31))
 
 
+@functools.lru_cache(maxsize=256)
 def _stream_key(seed: int, plume_index: int) -> np.uint64:
     """A 64-bit key per (seed, plume): distinct keys give unrelated streams."""
     seed_hash = splitmix64(np.array([seed % 2**64], dtype=np.uint64))
