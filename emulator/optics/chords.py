@@ -36,7 +36,7 @@ def _slab(
     tested. The ray is inside the box for near < t < far (empty when
     far < near). A direction component of exactly 0 keeps the ray inside
     that axis's slab for all t when its origin lies within it, and outside
-    otherwise.
+    otherwise (so does one so small that 1/d overflows).
     """
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # d may be 0 or subnormal
         inverse = 1.0 / directions
@@ -44,7 +44,7 @@ def _slab(
         t_upper = (upper - origins) * inverse
     near = np.minimum(t_lower, t_upper)
     far = np.maximum(t_lower, t_upper)
-    parallel = np.broadcast_to(directions == 0.0, near.shape)
+    parallel = np.broadcast_to(~np.isfinite(inverse), near.shape)  # d is 0 or so small that 1/d overflows
     if parallel.any():
         inside = (lower <= origins) & (origins <= upper)
         near = np.where(parallel, np.where(inside, -np.inf, np.inf), near)
@@ -76,7 +76,7 @@ def paired_cube_intervals(
         spread = half_sizes[:, None] * np.abs(inverse)
         near = np.fmax.reduce(middle - spread, axis=1)
         far = np.fmin.reduce(middle + spread, axis=1)
-    parallel = directions == 0.0
+    parallel = ~np.isfinite(inverse)  # d is 0 or so small that 1/d overflows
     if parallel.any():
         outside = (parallel & (np.abs(offset) > half_sizes[:, None])).any(axis=1)
         near = np.where(outside, np.inf, near)
