@@ -31,6 +31,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--seed", type=int, help="override the scene's seed")
     parser.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
+    parser.add_argument(
+        "--model", metavar="PRESET", help="smoke/sensor response preset replacing the scene's (formsma2011 or physical)"
+    )
 
 
 def endpoint_overrides(items: list[str]) -> dict[str, list[str]]:
@@ -46,11 +49,12 @@ def endpoint_overrides(items: list[str]) -> dict[str, list[str]]:
 
 def run(args: argparse.Namespace) -> int:
     from emulator.scene import load_scene
+    from emulator.sensors.physical import apply_model_override
 
     if not args.speed > 0:
         raise UserError(f"--speed must be > 0, got {args.speed}")
     overrides = endpoint_overrides(args.endpoint)
-    scene = load_scene(args.scene)
+    scene = apply_model_override(load_scene(args.scene), args.model)
     if args.seed is not None:
         scene = dataclasses.replace(scene, seed=args.seed)
     daemon = Daemon(scene, overrides, WallClock(args.speed))
