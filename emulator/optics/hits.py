@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Callable
 
 import numpy as np
 
@@ -31,6 +33,27 @@ class RegionCrossing:
 
 
 @dataclass(frozen=True)
+class PreparedBeams:
+    """Beams (N, 3) and what they meet of the scene's fixed geometry (`World.prepare`).
+
+    Solids as in `BeamHits`; `region_intervals` holds each region's (entry,
+    exit) as in `RegionCrossing`, `region_lengths` each region's chord length
+    before the beam's end (N,). Objects and region shapes never move, so a
+    sensor prepares its beams once and casts them at any time.
+    """
+
+    origins: np.ndarray
+    directions: np.ndarray
+    max_range_m: float
+    solid_range_m: np.ndarray
+    object_index: np.ndarray
+    reflectivity: np.ndarray
+    cos_incidence: np.ndarray
+    region_intervals: tuple[tuple[np.ndarray, np.ndarray], ...]
+    region_lengths: tuple[np.ndarray, ...]
+
+
+@dataclass(frozen=True)
 class BeamHits:
     """Per-beam physics of one cast at `time_s`, arrays of length N.
 
@@ -44,6 +67,7 @@ class BeamHits:
     plume_hit_range_m: entry distance into the first plume particle box met
         before the solid hit and within max_range_m (0 when the origin is in a
         box), inf if none; plume_hit_density: that particle's density (0 if none).
+        Both come from `first_particle`, called on first use only.
     """
 
     time_s: float
@@ -54,11 +78,22 @@ class BeamHits:
     cos_incidence: np.ndarray
     region_optical_path: np.ndarray
     regions: tuple[RegionCrossing, ...]
-    plume_hit_range_m: np.ndarray
-    plume_hit_density: np.ndarray
+    first_particle: Callable[[], tuple[np.ndarray, np.ndarray]] = field(repr=False, compare=False)
 
     def __len__(self) -> int:
         return len(self.solid_range_m)
+
+    @cached_property
+    def _first_particle_hits(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.first_particle()
+
+    @property
+    def plume_hit_range_m(self) -> np.ndarray:
+        return self._first_particle_hits[0]
+
+    @property
+    def plume_hit_density(self) -> np.ndarray:
+        return self._first_particle_hits[1]
 
     @property
     def beam_end_m(self) -> np.ndarray:

@@ -6,6 +6,11 @@ beam's first triangle and the distance is then recomputed in float64 from that
 triangle's plane (Embree works in float32). Smoke regions use exact analytic
 chords (`chords.py`); plume particles are axis-aligned boxes met by a
 vectorised slab test over beams × particles.
+
+Objects and region shapes never move: what a fixed set of beams meets of them
+is computed once by `prepare` (a sensor keeps it), and `cast_prepared` adds
+what changes with time (region densities, particles). Only the first particle
+per beam is computed on demand, as the `physical` preset never asks for it.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ from embreex.rtcore_scene import EmbreeScene
 from emulator.errors import SceneError
 from emulator.optics.candidates import candidate_pairs
 from emulator.optics.chords import NO_HIT, paired_cube_intervals, shape_intervals
-from emulator.optics.hits import BeamHits, RegionCrossing
+from emulator.optics.hits import BeamHits, PreparedBeams, RegionCrossing
 from emulator.scene.geometry import shape_mesh, world_mesh, world_to_local
 from emulator.scene.model import MeshFile, Scene
 from emulator.scene.plumes import Particles, particles_at
@@ -47,6 +52,8 @@ class World:
         self._region_meshes: dict[int, trimesh.Trimesh] = {
             i: shape_mesh(region.shape) for i, region in enumerate(scene.regions) if isinstance(region.shape, MeshFile)
         }
+        self._particles_time: float | None = None
+        self._particles = Particles.empty()
 
     def _reflectivity(self, material: str) -> float:
         if material not in self.scene.materials:
@@ -54,10 +61,15 @@ class World:
         return float(self.scene.materials[material].reflectivity)
 
     def particles_at(self, time_s: float) -> Particles:
-        """All plumes' particles alive at `time_s`."""
-        return Particles.concatenate(
-            [particles_at(plume, self.scene.seed, i, time_s) for i, plume in enumerate(self.scene.plumes)]
-        )
+        """All plumes' particles alive at `time_s` (the last instant's are kept: a scan asks twice)."""
+        if time_s != self._particles_time:
+            particles = Particles.concatenate(
+                [particles_at(plume, self.scene.seed, i, time_s) for i, plume in enumerate(self.scene.plumes)]
+            )
+            for array in (particles.centers, particles.half_sizes, particles.density, particles.index):
+                array.flags.writeable = False  # shared by every caller at this instant
+            self._particles, self._particles_time = particles, time_s
+        return self._particles
 
     def first_triangles(self, origins: np.ndarray, directions: np.ndarray, max_range_m: float) -> np.ndarray:
         """Embree's first triangle index per ray within max_range_m (-1 for none): the plain INTERSECT."""
@@ -72,29 +84,43 @@ class World:
 
     def cast(self, origins: np.ndarray, directions: np.ndarray, max_range_m: float, time_s: float) -> BeamHits:
         """Cast beams from `origins` (N, 3) along unit `directions` (N, 3) at `time_s`."""
+        return self.cast_prepared(self.prepare(origins, directions, max_range_m), time_s)
+
+    def prepare(self, origins: np.ndarray, directions: np.ndarray, max_range_m: float) -> PreparedBeams:
+        """What the beams meet of the scene's fixed geometry: solids and region intervals."""
         origins = np.asarray(origins, dtype=float)
         directions = np.asarray(directions, dtype=float)
         solid_range, object_index, reflectivity, cos_incidence = self._solids(origins, directions, max_range_m)
-        beam_end = np.minimum(solid_range, max_range_m)
-        regions = tuple(
-            self._region_crossing(i, origins, directions, max_range_m, time_s) for i in range(len(self.scene.regions))
+        intervals = tuple(
+            self._region_intervals(i, origins, directions, max_range_m) for i in range(len(self.scene.regions))
         )
-        optical_path = np.zeros(len(origins))
-        for crossing in regions:
+        beam_end = np.minimum(solid_range, max_range_m)
+        lengths = tuple(RegionCrossing(i, 0.0, *interval).length_before(beam_end) for i, interval in enumerate(intervals))
+        return PreparedBeams(
+            origins, directions, max_range_m, solid_range, object_index, reflectivity, cos_incidence, intervals, lengths
+        )
+
+    def cast_prepared(self, prepared: PreparedBeams, time_s: float) -> BeamHits:
+        """`cast` of prepared beams at `time_s`: only the smoke is evaluated."""
+        regions = tuple(
+            RegionCrossing(i, float(region.density.at(time_s)), *prepared.region_intervals[i])
+            for i, region in enumerate(self.scene.regions)
+        )
+        optical_path = np.zeros(len(prepared.origins))
+        for crossing, length in zip(regions, prepared.region_lengths):
             if crossing.density:
-                optical_path += crossing.density * crossing.length_before(beam_end)
-        plume_range, plume_density = self._first_particle(origins, directions, beam_end, time_s)
+                optical_path += crossing.density * length
+        beam_end = np.minimum(prepared.solid_range_m, prepared.max_range_m)
         return BeamHits(
             time_s=time_s,
-            max_range_m=max_range_m,
-            solid_range_m=solid_range,
-            object_index=object_index,
-            reflectivity=reflectivity,
-            cos_incidence=cos_incidence,
+            max_range_m=prepared.max_range_m,
+            solid_range_m=prepared.solid_range_m,
+            object_index=prepared.object_index,
+            reflectivity=prepared.reflectivity,
+            cos_incidence=prepared.cos_incidence,
             region_optical_path=optical_path,
             regions=regions,
-            plume_hit_range_m=plume_range,
-            plume_hit_density=plume_density,
+            first_particle=lambda: self._first_particle(prepared.origins, prepared.directions, beam_end, time_s),
         )
 
     def _solids(
@@ -118,21 +144,17 @@ class World:
             np.where(hit, np.abs(facing), 0.0),
         )
 
-    def _region_crossing(
-        self, index: int, origins: np.ndarray, directions: np.ndarray, max_range_m: float, time_s: float
-    ) -> RegionCrossing:
+    def _region_intervals(
+        self, index: int, origins: np.ndarray, directions: np.ndarray, max_range_m: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Entry and exit (N, K) of the beams in region `index`, clipped to [0, max_range_m]; inf where missing."""
         region = self.scene.regions[index]
         local_origins, local_directions = world_to_local(region.pose, origins, directions)
         entry, exit_ = shape_intervals(region.shape, local_origins, local_directions, self._region_meshes.get(index))
         entry = np.maximum(entry, 0.0)
         exit_ = np.minimum(exit_, max_range_m)
         missing = ~(exit_ > entry)
-        return RegionCrossing(
-            region_index=index,
-            density=float(region.density.at(time_s)),
-            entry_m=np.where(missing, NO_HIT, entry),
-            exit_m=np.where(missing, NO_HIT, exit_),
-        )
+        return np.where(missing, NO_HIT, entry), np.where(missing, NO_HIT, exit_)
 
     def _first_particle(
         self, origins: np.ndarray, directions: np.ndarray, beam_end: np.ndarray, time_s: float

@@ -13,7 +13,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from emulator.optics import World
+from emulator.optics import PreparedBeams, World
 from emulator.scene.model import Scene, SensorSpec
 from emulator.sensors.beam_geometry import scan_plane_rays
 from emulator.sensors.response import Beams, response_model
@@ -55,15 +55,17 @@ class LmsSensor:
         self.scene, self.spec, self.world = scene, spec, world
         self.name = spec.name
         self._response = response_model(scene.model)
-        self._rays: dict[tuple[float, float, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._rays: dict[tuple[float, float, int], tuple[np.ndarray, PreparedBeams]] = {}
 
-    def _beams(self, start_deg: float, step_deg: float, count: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Sensor-frame angles, origins and directions of a window (a device uses few windows: cached)."""
+    def _beams(self, start_deg: float, step_deg: float, count: int) -> tuple[np.ndarray, PreparedBeams]:
+        """Sensor-frame angles of a window and its beams prepared against the fixed geometry
+        (a device uses few windows, and objects never move: cached)."""
         key = (start_deg, step_deg, count)
         if key not in self._rays:
             angles_rad = np.radians(device_angles_deg(start_deg, step_deg, count) - 90.0)
             angles_rad.flags.writeable = False
-            self._rays[key] = (angles_rad, *scan_plane_rays(self.spec.pose, angles_rad))
+            origins, directions = scan_plane_rays(self.spec.pose, angles_rad)
+            self._rays[key] = (angles_rad, self.world.prepare(origins, directions, REACH_M))
         return self._rays[key]
 
     def scan(
@@ -72,9 +74,9 @@ class LmsSensor:
         """Values at device angles start_deg + i·step_deg (i < count), in `unit`, at `time_s`."""
         if unit not in UNITS_PER_M:
             raise ValueError(f"unit must be one of {sorted(UNITS_PER_M)}, got {unit!r}")
-        angles_rad, origins, directions = self._beams(start_deg, step_deg, count)
-        hits = self.world.cast(origins, directions, REACH_M, time_s)
-        beams = Beams(self.scene, self.spec, self.world, time_s, angles_rad, origins, directions)
+        angles_rad, prepared = self._beams(start_deg, step_deg, count)
+        hits = self.world.cast_prepared(prepared, time_s)
+        beams = Beams(self.scene, self.spec, self.world, time_s, angles_rad, prepared.origins, prepared.directions)
         values = np.asarray(self._response.lms_values(hits, beams, unit), dtype=np.int64)
         return Scan(self.name, MODEL, time_s, angles_rad, values, unit)
 
