@@ -162,11 +162,13 @@ def _cumulative_at(cumulative: np.ndarray, edges_m: np.ndarray, points_m: np.nda
         fractions = np.linspace(0.0, 1.0, edges_m.shape[1])
     bins = cumulative.shape[1] - 1
     along = (np.where(np.isfinite(points_m), points_m, stop) - start) / np.where(length > 0, length, 1.0)
-    along = np.clip(along, 0.0, 1.0)
-    index = np.clip(np.searchsorted(fractions, along, side="right") - 1, 0, bins - 1)
+    along = np.minimum(np.maximum(along, 0.0), 1.0)
+    index = np.searchsorted(fractions, along, side="right") - 1
+    index = np.minimum(np.maximum(index, 0), bins - 1)
     fraction = (along - fractions[index]) / (fractions[index + 1] - fractions[index])
-    low = np.take_along_axis(cumulative, index, axis=1)
-    high = np.take_along_axis(cumulative, index + 1, axis=1)
+    flat = index + (np.arange(len(cumulative)) * cumulative.shape[1])[:, None]  # row-major (N, bins + 1)
+    values = cumulative.ravel()
+    low, high = values[flat], values[flat + 1]
     return low + fraction * (high - low)
 
 
@@ -188,14 +190,21 @@ def lms_first_echo(
     threshold = float(np.exp(log_threshold_value))
     cumulative = np.concatenate([np.zeros((len(smoke_amp), 1)), np.cumsum(smoke_amp, axis=1)], axis=1)
 
-    def smoke_window(points_m: np.ndarray) -> np.ndarray:
-        return _cumulative_at(cumulative, edges_m, points_m) - _cumulative_at(cumulative, edges_m, points_m - receiver.window_m)
+    no_smoke = not cumulative.any()
 
-    smoke_at = _crossing_on_grid(smoke_window(edges_m), edges_m, threshold)
+    def smoke_window(points_m: np.ndarray) -> np.ndarray:
+        """Smoke energy within the window ending at each point: one interpolation for both ends."""
+        if no_smoke:
+            return np.zeros(points_m.shape)
+        at = _cumulative_at(cumulative, edges_m, np.concatenate([points_m, points_m - receiver.window_m], axis=1))
+        return at[:, : points_m.shape[1]] - at[:, points_m.shape[1] :]
+
     order = np.argsort(np.where(target_amp > 0, target_range_m, np.inf), axis=1)
     ranges = np.take_along_axis(target_range_m, order, axis=1)
     amps = np.take_along_axis(target_amp, order, axis=1)
-    energy_at_target = smoke_window(ranges) + np.cumsum(amps, axis=1)
+    windows = smoke_window(np.concatenate([edges_m, ranges], axis=1))  # the bin edges and the surfaces at once
+    smoke_at = _crossing_on_grid(windows[:, : edges_m.shape[1]], edges_m, threshold)
+    energy_at_target = windows[:, edges_m.shape[1] :] + np.cumsum(amps, axis=1)
     reached = (energy_at_target >= threshold) & (amps > 0)
     rows = np.arange(len(ranges))
     first_target = np.argmax(reached, axis=1)

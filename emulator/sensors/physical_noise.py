@@ -6,6 +6,7 @@ the scan time, so a scan is reproducible from the scene alone.
 
 from __future__ import annotations
 
+import functools
 import zlib
 
 import numpy as np
@@ -35,13 +36,23 @@ def fluctuation_field(seed: int, sensor: str, angles_rad: np.ndarray, time_s: fl
     `fluctuation_angle_deg` and `fluctuation_time_s`, so neighbouring beams and consecutive scans flicker
     together.
     """
-    rng = np.random.default_rng(_sensor_key(seed, sensor) + [_FLUCTUATION_STREAM])
-    modes = params.fluctuation_modes
-    wavenumber = rng.normal(0.0, 1.0 / np.radians(params.fluctuation_angle_deg), modes)
-    frequency = rng.normal(0.0, 2.0 * np.pi / params.fluctuation_time_s, modes)
-    phase = rng.uniform(0.0, 2.0 * np.pi, modes)
+    wavenumber, frequency, phase = _fluctuation_modes(
+        seed, sensor, params.fluctuation_modes, params.fluctuation_angle_deg, params.fluctuation_time_s
+    )
     argument = np.outer(angles_rad, wavenumber) + frequency * time_s + phase
-    return np.sqrt(2.0 / modes) * np.cos(argument).sum(axis=1)
+    return np.sqrt(2.0 / params.fluctuation_modes) * np.cos(argument).sum(axis=1)
+
+
+@functools.lru_cache(maxsize=64)
+def _fluctuation_modes(seed: int, sensor: str, modes: int, angle_deg: float, time_s: float) -> tuple[np.ndarray, ...]:
+    """The field's random wavenumbers, frequencies and phases: fixed per seed and sensor, so drawn once."""
+    rng = np.random.default_rng(_sensor_key(seed, sensor) + [_FLUCTUATION_STREAM])
+    wavenumber = rng.normal(0.0, 1.0 / np.radians(angle_deg), modes)
+    frequency = rng.normal(0.0, 2.0 * np.pi / time_s, modes)
+    phase = rng.uniform(0.0, 2.0 * np.pi, modes)
+    for array in (wavenumber, frequency, phase):
+        array.flags.writeable = False
+    return wavenumber, frequency, phase
 
 
 def edge_strength(column: np.ndarray, angles_rad: np.ndarray, smoke_distance_m: np.ndarray, length_m: float) -> np.ndarray:
