@@ -218,8 +218,10 @@ def _smoke_echoes(
 ) -> SmokeEchoes:
     rows = np.flatnonzero(np.isfinite(start) & (end > start)) if params.backscatter else np.zeros(0, dtype=np.int64)
     low, high = start[rows], end[rows]
-    edges = low[:, None] + (high - low)[:, None] * bin_fractions(params)
-    path = factor[rows, None] * (_region_path_to(hits, rows, edges) + crossings.optical_path_to(edges, rows))
+    fractions = bin_fractions(params)
+    edges = low[:, None] + (high - low)[:, None] * fractions
+    puff_path = crossings.optical_path_on_grid(rows, low, high - low, fractions)
+    path = factor[rows, None] * (_region_path_to(hits, rows, edges) + puff_path)
     width = np.diff(edges, axis=1)
     local_extinction = extinction * np.diff(path, axis=1) / np.where(width > 0, width, 1.0)
     multiple_scattering = 1.0 + (local_extinction / params.multiple_scattering_extinction) ** 3

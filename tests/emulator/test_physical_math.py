@@ -62,6 +62,32 @@ def test_puff_optical_path_equals_numerical_integration_of_the_gaussian(centre, 
     assert analytic == pytest.approx(numeric, abs=0.012 * 0.05 * edge + 1e-9)
 
 
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), growth=st.floats(1.0, 1.6), bins=st.integers(1, 24))
+def test_puff_path_on_a_grid_equals_the_path_to_each_grid_point(seed, growth, bins):
+    """The shortcut for ascending range bins (CDF only within ±6 sigma of each puff) against
+    `optical_path_to` at the same distances, on beams that start inside, before and past puffs."""
+    rng = np.random.default_rng(seed)
+    count = 200
+    particles = Particles(
+        rng.uniform([-1, -4, 0], [6, 4, 0.8], (count, 3)), rng.uniform(0.02, 0.4, count), rng.uniform(0.01, 0.1, count), np.arange(count)
+    )
+    angles = np.radians(np.linspace(-100, 100, 161))
+    directions = np.stack([np.cos(angles), np.sin(angles), np.zeros_like(angles)], axis=1)
+    origins = np.tile([0.0, 0.0, 0.4], (len(angles), 1))
+    crossings = cross_beams(Puffs.from_particles(particles), origins, directions, np.full(len(angles), 7.0))
+    rows = np.unique(crossings.beam)[::2]
+    assert len(rows) > 10
+    start = rng.uniform(0.0, 3.0, len(rows))
+    length = rng.uniform(0.01, 5.0, len(rows))
+    widths = growth ** np.arange(bins)
+    fractions = np.concatenate([[0.0], np.cumsum(widths) / widths.sum()])
+    grid = start[:, None] + length[:, None] * fractions
+    expected = crossings.optical_path_to(grid, rows)
+    assert np.count_nonzero(expected) > 10
+    np.testing.assert_allclose(crossings.optical_path_on_grid(rows, start, length, fractions), expected, rtol=0, atol=1e-12)
+
+
 def test_fan_culling_finds_the_same_pairs_as_brute_force():
     rng = np.random.default_rng(3)
     particles = Particles(
