@@ -97,6 +97,26 @@ def velocity_offsets(seed: int, plume_index: int, particle_index: np.ndarray, sp
     return spread * normals[:, :3]
 
 
+_OFFSET_BLOCK = 1024  # particles per cached block of velocity offsets
+
+
+def _cached_velocity_offsets(seed: int, plume_index: int, particle_index: np.ndarray, spread: float) -> np.ndarray:
+    """`velocity_offsets`, drawn once per block of consecutive particles: every scan of a
+    particle's lifetime needs its offset again, and the alive particles are a sliding window."""
+    if len(particle_index) == 0:
+        return np.zeros((0, 3))
+    first, last = int(particle_index[0]) // _OFFSET_BLOCK, int(particle_index[-1]) // _OFFSET_BLOCK
+    blocks = np.concatenate([_offset_block(seed, plume_index, block, spread) for block in range(first, last + 1)])
+    return blocks[particle_index - first * _OFFSET_BLOCK]
+
+
+@functools.lru_cache(maxsize=64)
+def _offset_block(seed: int, plume_index: int, block: int, spread: float) -> np.ndarray:
+    offsets = velocity_offsets(seed, plume_index, np.arange(block * _OFFSET_BLOCK, (block + 1) * _OFFSET_BLOCK), spread)
+    offsets.flags.writeable = False
+    return offsets
+
+
 def alive_indices(plume: Plume, time_s: float) -> np.ndarray:
     """Indices i of the particles alive at `time_s`, ascending."""
     if time_s < plume.start:
@@ -116,7 +136,7 @@ def particles_at(plume: Plume, seed: int, plume_index: int, time_s: float) -> Pa
     index = alive_indices(plume, time_s)
     age = time_s - (plume.start + index / plume.rate)
     velocity = np.asarray(plume.velocity, dtype=float) + np.asarray(plume.wind, dtype=float)
-    offsets = velocity_offsets(seed, plume_index, index, plume.spread)
+    offsets = _cached_velocity_offsets(seed, plume_index, index, plume.spread)
     centers = np.asarray(plume.source, dtype=float) + (velocity + offsets) * age[:, None]
     half_sizes = 0.5 * (plume.size + plume.growth * age)
     density = np.full(len(index), float(plume.density))
