@@ -8,10 +8,11 @@ The report is a list of named sections. Each section is a function
   beams of every bundled scene's sensors with the smoke removed; several scans
   are batched per call, as a daemon with several clients would. `ratio` is
   ours/raw in rays per second over all scenes.
-- scans: one scan's compute time per bundled scene and sensor, with smoke,
-  against the sensor's period: URG-04LX 100 ms; LMS200 the scan its scene
-  options select against the time the mirror needs for it (1° → 1 revolution
-  of 13.33 ms, 0.5° → 2, 0.25° → 4; the default 361-value scan: 26.67 ms).
+- scans: one scan's compute time per bundled scene, sensor and smoke/sensor
+  preset (each scene under every preset, as `--model` would serve it), with
+  smoke, against the sensor's period: URG-04LX 100 ms; LMS200 the scan its
+  scene options select against the time the mirror needs for it (1° → 1
+  revolution of 13.33 ms, 0.5° → 2, 0.25° → 4; the default 361-value scan: 26.67 ms).
 - transport: command latency and MD scan jitter through a served daemon
   (emulator.transport.bench).
 - lms-rates: LMS200 scans/s per baud and resolution through a served daemon
@@ -36,6 +37,8 @@ from emulator.scene import bundled_scenes, load_scene
 from emulator.scene.model import Scene, SensorSpec
 from emulator.sensors import create_sensor, lms200, urg04lx
 from emulator.sensors.beam_geometry import scan_plane_rays
+from emulator.sensors.physical import apply_model_override
+from emulator.sensors.response import PRESET_MODULES
 
 SCANS_PER_BATCH = 16
 SCAN_REPEATS = 3  # each instant is timed this often and the fastest kept
@@ -113,35 +116,39 @@ def rays_section(quick: bool) -> Section:
 
 
 def scans_section(quick: bool) -> Section:
-    """Compute time of scans spread over the first minute of each scene (smoke on): per instant
-    the fastest of SCAN_REPEATS, so other load on the machine does not count; mean and max over instants."""
+    """Compute time of scans spread over the first minute of each scene (smoke on) under each preset:
+    per instant the fastest of SCAN_REPEATS, so other load on the machine does not count; mean and max over instants."""
     times = np.linspace(1.0, 60.0, 5 if quick else 60)
     rows = []
-    for scene in _scenes():
-        world = World(scene)
-        for spec in scene.sensors:
-            sensor = create_sensor(scene, spec.name, world)
-            sensor.configured_scan(0.0)  # the first call pays one-off set-up
-            durations = [_best_seconds(lambda: sensor.configured_scan(float(t)), SCAN_REPEATS) for t in times]
-            scan_ms = float(np.mean(durations)) * 1000.0
-            period_ms = sensor.configured_period_s * 1000.0
-            rows.append({
-                "scene": scene.path.stem if scene.path else scene.name,
-                "sensor": spec.name,
-                "model": spec.model,
-                "scan_ms": scan_ms,
-                "max_scan_ms": float(np.max(durations)) * 1000.0,
-                "period_ms": period_ms,
-                "fraction": scan_ms / period_ms,
-            })
+    for bundled in _scenes():
+        for preset in PRESET_MODULES:
+            scene = apply_model_override(bundled, preset)
+            world = World(scene)
+            for spec in scene.sensors:
+                sensor = create_sensor(scene, spec.name, world)
+                sensor.configured_scan(0.0)  # the first call pays one-off set-up
+                durations = [_best_seconds(lambda: sensor.configured_scan(float(t)), SCAN_REPEATS) for t in times]
+                scan_ms = float(np.mean(durations)) * 1000.0
+                period_ms = sensor.configured_period_s * 1000.0
+                rows.append({
+                    "scene": scene.path.stem if scene.path else scene.name,
+                    "sensor": spec.name,
+                    "model": spec.model,
+                    "preset": preset,
+                    "scan_ms": scan_ms,
+                    "max_scan_ms": float(np.max(durations)) * 1000.0,
+                    "period_ms": period_ms,
+                    "fraction": scan_ms / period_ms,
+                })
     lines = [
         f"scans: compute time per scan with smoke (mean and max over {len(times)} instants in 1..60 s,"
         f" best of {SCAN_REPEATS} each)",
-        f"  {'scene':<10} {'sensor':<8} {'model':<9} {'scan ms':>8} {'max ms':>7} {'period ms':>10} {'fraction':>9}",
+        f"  {'scene':<10} {'sensor':<8} {'model':<9} {'preset':<12} {'scan ms':>8} {'max ms':>7} {'period ms':>10}"
+        f" {'fraction':>9}",
     ]
     for row in rows:
         lines.append(
-            f"  {row['scene']:<10} {row['sensor']:<8} {row['model']:<9} {row['scan_ms']:>8.2f}"
+            f"  {row['scene']:<10} {row['sensor']:<8} {row['model']:<9} {row['preset']:<12} {row['scan_ms']:>8.2f}"
             f" {row['max_scan_ms']:>7.2f} {row['period_ms']:>10.2f} {row['fraction']:>8.1%}"
         )
     return {"scans": rows}, lines

@@ -23,7 +23,10 @@ def test_bench_json_reports_every_bundled_sensor_and_every_section():
 
     specs = {(bundled.name, spec.name): spec for bundled in bundled_scenes() for spec in load_scene(bundled.name).sensors}
     expected = {(scene, name, spec.model) for (scene, name), spec in specs.items()}
-    assert {(row["scene"], row["sensor"], row["model"]) for row in report["scans"]} == expected
+    # every scene and sensor under every preset, once
+    scan_rows = [(row["scene"], row["sensor"], row["model"], row["preset"]) for row in report["scans"]]
+    assert len(scan_rows) == len(set(scan_rows))
+    assert set(scan_rows) == {(*key, preset) for key in expected for preset in ("formsma2011", "physical")}
     for row in report["scans"]:
         assert row["scan_ms"] > 0 and row["max_scan_ms"] >= row["scan_ms"]
         spec = specs[row["scene"], row["sensor"]]
