@@ -20,6 +20,7 @@ beams x puffs; only (beam, puff) pairs within `REACH_SIGMAS` are kept.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -215,8 +216,36 @@ def _all_pairs(n_beams: int, n_puffs: int) -> tuple[np.ndarray, np.ndarray]:
     return beam.ravel(), puff.ravel()
 
 
-def _fan_pairs(puffs: Puffs, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Candidate (beam, puff) pairs of a fan of beams, or None if the beams are no fan."""
+@dataclass(frozen=True)
+class _Fan:
+    """A fan's plane (`first`, `second` in it, `normal`) and its beams' angles in it, ascending."""
+
+    first: np.ndarray
+    second: np.ndarray
+    normal: np.ndarray
+    beam_angle: np.ndarray
+
+
+_FANS: dict[tuple[int, int], tuple[weakref.ref, weakref.ref, _Fan | None]] = {}
+_FANS_KEPT = 64
+
+
+def _fan_of(origins: np.ndarray, directions: np.ndarray) -> _Fan | None:
+    """The beams' fan, or None if they are no fan. Kept for read-only beam arrays: a sensor's
+    beams are the same arrays every scan."""
+    key = (id(origins), id(directions))
+    kept = _FANS.get(key)
+    if kept is not None and kept[0]() is origins and kept[1]() is directions:
+        return kept[2]
+    fan = _fan_geometry(origins, directions)
+    if not origins.flags.writeable and not directions.flags.writeable:
+        if len(_FANS) >= _FANS_KEPT:
+            _FANS.clear()
+        _FANS[key] = (weakref.ref(origins), weakref.ref(directions), fan)
+    return fan
+
+
+def _fan_geometry(origins: np.ndarray, directions: np.ndarray) -> _Fan | None:
     if len(origins) < 2 or np.ptp(origins, axis=0).max() > 0.0:
         return None
     first = directions[len(directions) // 2]
@@ -232,6 +261,17 @@ def _fan_pairs(puffs: Puffs, origins: np.ndarray, directions: np.ndarray) -> tup
         second, beam_angle = -second, -beam_angle
     if np.any(np.diff(beam_angle) <= 0):
         return None
+    for array in (first, second, normal, beam_angle):
+        array.flags.writeable = False  # kept and shared by later scans
+    return _Fan(first, second, normal, beam_angle)
+
+
+def _fan_pairs(puffs: Puffs, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Candidate (beam, puff) pairs of a fan of beams, or None if the beams are no fan."""
+    fan = _fan_of(origins, directions)
+    if fan is None:
+        return None
+    first, second, normal, beam_angle = fan.first, fan.second, fan.normal, fan.beam_angle
     offset = puffs.centers - origins[0]
     height = _dot(offset, normal)
     x, y = _dot(offset, first), _dot(offset, second)
