@@ -94,6 +94,8 @@ class World:
         intervals = tuple(
             self._region_intervals(i, origins, directions, max_range_m) for i in range(len(self.scene.regions))
         )
+        for array in (solid_range, object_index, reflectivity, cos_incidence):
+            array.flags.writeable = False  # shared by every scan of these beams
         beam_end = np.minimum(solid_range, max_range_m)
         lengths = tuple(RegionCrossing(i, 0.0, *interval).length_before(beam_end) for i, interval in enumerate(intervals))
         return PreparedBeams(

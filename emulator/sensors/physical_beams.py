@@ -110,14 +110,42 @@ def _depth_edges(hits: BeamHits, params: PhysicalParams) -> np.ndarray:
     return edge
 
 
-def _surfaces(
-    hits: BeamHits,
-    beams: Beams,
-    crossings: BeamPuffCrossings,
-    factor: np.ndarray,
-    receiver: ReceiverOptics,
-    params: PhysicalParams,
-) -> Surfaces:
+@dataclass(frozen=True)
+class _SurfaceGeometry:
+    """What each beam's footprint meets of the fixed objects (N, S): unused sub-rays have range inf.
+
+    Material effects are applied (patchy reflectivity, cos^n); only the smoke
+    in front of these surfaces changes from scan to scan.
+    """
+
+    ranges: np.ndarray
+    reflectivity: np.ndarray
+    cos_factor: np.ndarray
+    stretch: np.ndarray
+    used: np.ndarray
+    edge_rows: np.ndarray
+
+
+_GEOMETRY_KEPT = 64
+_GEOMETRIES: dict[tuple, tuple[weakref.ref, weakref.ref, _SurfaceGeometry]] = {}
+
+
+def _surface_geometry(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, params: PhysicalParams) -> _SurfaceGeometry:
+    """`_footprint_surfaces`, kept while the beams are the same read-only arrays (a sensor's prepared
+    beams: `World.prepare`), since objects never move."""
+    key = (id(hits.solid_range_m), id(beams.angles_rad), receiver, params, beams.scene.seed)
+    kept = _GEOMETRIES.get(key)
+    if kept is not None and kept[0]() is hits.solid_range_m and kept[1]() is beams.angles_rad:
+        return kept[2]
+    geometry = _footprint_surfaces(hits, beams, receiver, params)
+    if not hits.solid_range_m.flags.writeable and not beams.angles_rad.flags.writeable:
+        if len(_GEOMETRIES) >= _GEOMETRY_KEPT:
+            _GEOMETRIES.clear()
+        _GEOMETRIES[key] = (weakref.ref(hits.solid_range_m), weakref.ref(beams.angles_rad), geometry)
+    return geometry
+
+
+def _footprint_surfaces(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, params: PhysicalParams) -> _SurfaceGeometry:
     n = len(hits)
     sub_rays = params.sub_rays if params.mixed_pixels else 1
     ranges = np.full((n, sub_rays), np.inf)
@@ -128,8 +156,6 @@ def _surfaces(
     reflectivity[:, 0] = hits.reflectivity
     cosine = np.zeros((n, sub_rays))
     cosine[:, 0] = hits.cos_incidence
-    region_path = np.zeros((n, sub_rays))
-    region_path[:, 0] = hits.region_optical_path
     used = np.zeros((n, sub_rays), dtype=bool)
     used[:, 0] = True
     edge_rows = np.flatnonzero(_depth_edges(hits, params)) if sub_rays > 1 else np.zeros(0, dtype=np.int64)
@@ -138,18 +164,40 @@ def _surfaces(
         angles = beams.angles_rad[edge_rows][:, None] + offsets
         solids = _sub_ray_solids(beams, angles, hits.max_range_m)
         ranges[edge_rows], objects[edge_rows], reflectivity[edge_rows], cosine[edge_rows] = solids
-        region_path[edge_rows] = _region_path_to(hits, edge_rows, np.minimum(ranges[edge_rows], hits.max_range_m))
         used[edge_rows] = True
     present = used & np.isfinite(ranges)
-    puff_path = crossings.optical_path_to(np.where(present, ranges, 0.0))
-    optical_path = factor[:, None] * (region_path + puff_path)
     angle_exponent, stretch, patchiness = _material_arrays(beams, objects, params)
     patchy = np.nonzero(present & (patchiness > 0))
     if len(patchy[0]):
         points = beams.origins[patchy[0]] + beams.directions[patchy[0]] * ranges[patchy][:, None]
         reflectivity[patchy] *= np.exp(patchiness[patchy] * patch_values(points, beams.scene.seed))
+    geometry = _SurfaceGeometry(ranges, reflectivity, cosine**angle_exponent, stretch, used, edge_rows)
+    for array in (ranges, reflectivity, geometry.cos_factor, stretch, used, edge_rows):
+        array.flags.writeable = False
+    return geometry
+
+
+def _surfaces(
+    hits: BeamHits,
+    beams: Beams,
+    crossings: BeamPuffCrossings,
+    factor: np.ndarray,
+    receiver: ReceiverOptics,
+    params: PhysicalParams,
+) -> Surfaces:
+    geometry = _surface_geometry(hits, beams, receiver, params)
+    ranges, reflectivity, cos_factor, stretch, used = (
+        geometry.ranges, geometry.reflectivity, geometry.cos_factor, geometry.stretch, geometry.used
+    )
+    region_path = np.zeros(ranges.shape)
+    region_path[:, 0] = hits.region_optical_path
+    edge_rows = geometry.edge_rows
+    if len(edge_rows):
+        region_path[edge_rows] = _region_path_to(hits, edge_rows, np.minimum(ranges[edge_rows], hits.max_range_m))
+    present = used & np.isfinite(ranges)
+    puff_path = crossings.optical_path_to(np.where(present, ranges, 0.0))
+    optical_path = factor[:, None] * (region_path + puff_path)
     extinction = beams.scene.density_to_extinction
-    cos_factor = cosine**angle_exponent
     log_each = log_target_echo(reflectivity, cos_factor, ranges, optical_path, extinction, receiver, params)
     log_each = np.where(present, log_each, -np.inf)
     shares = used.sum(axis=1, keepdims=True)

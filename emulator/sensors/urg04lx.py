@@ -51,15 +51,15 @@ class UrgSensor:
         self.name = spec.name
         self.angles_rad = step_angles_rad()
         self._valid = slice(FIRST_VALID_STEP, LAST_VALID_STEP + 1)
-        self._origins, self._directions = scan_plane_rays(spec.pose, self.angles_rad[self._valid])
+        self._valid_angles = self.angles_rad[self._valid]
+        self._origins, self._directions = scan_plane_rays(spec.pose, self._valid_angles)
         self._prepared = world.prepare(self._origins, self._directions, MAX_RANGE_M)  # objects never move
         self._response = response_model(scene.model)
 
     def scan(self, time_s: float) -> Scan:
         """The scan completed at simulated time `time_s` (the world evaluated at that instant)."""
         hits = self.world.cast_prepared(self._prepared, time_s)
-        angles = self.angles_rad[self._valid]
-        beams = Beams(self.scene, self.spec, self.world, time_s, angles, self._origins, self._directions)
+        beams = Beams(self.scene, self.spec, self.world, time_s, self._valid_angles, self._origins, self._directions)
         values = np.full(STEPS, OUTSIDE_VALID_AREA, dtype=np.int64)
         values[self._valid] = self._response.urg_values(hits, beams)
         return Scan(self.name, MODEL, time_s, self.angles_rad, values, "mm")

@@ -49,3 +49,17 @@ def test_bundled_scenes_scan_under_the_physical_model():
             assert values.dtype.kind == "i" and values.min() >= 0
             if spec.model == "lms200":
                 assert values.max() <= 8191
+
+
+@pytest.mark.parametrize("preset", ["formsma2011", "physical"])
+def test_what_sensors_keep_between_scans_changes_no_value(preset):
+    """Prepared beams, surfaces, fan geometry and the last instant's particles are kept across scans
+    (objects never move): two sensors sharing a world, scanning interleaved instants in any order,
+    give exactly the values of a fresh world and sensor per scan."""
+    scene = apply_model_override(load_scene("railway"), preset)
+    world = World(scene)
+    kept = {name: create_sensor(scene, name, world) for name in ("urg", "lms")}
+    for time_s in (20.0, 3.5, 20.0, 41.25, 3.5):
+        for name in ("lms", "urg"):
+            fresh = create_sensor(scene, name, World(scene)).configured_scan(time_s).values
+            np.testing.assert_array_equal(kept[name].configured_scan(time_s).values, fresh)
