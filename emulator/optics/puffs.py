@@ -193,7 +193,7 @@ def cross_beams(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_
     puffs = _near_segments(puffs, origins, directions, beam_end_m)
     fan = _fan_pairs(puffs, origins, directions)
     beam, puff = fan if fan is not None else _all_pairs(len(origins), len(puffs))
-    offset = puffs.centers[puff] - origins[beam]
+    offset = puffs.centers[puff] - (origins[0] if fan is not None else origins[beam])  # a fan has one origin
     along = np.einsum("ij,ij->i", offset, directions[beam])
     distance_sq = np.einsum("ij,ij->i", offset, offset)
     miss_sq = np.maximum(distance_sq - along * along, 0.0)

@@ -195,7 +195,11 @@ def _surfaces(
     if len(edge_rows):
         region_path[edge_rows] = _region_path_to(hits, edge_rows, np.minimum(ranges[edge_rows], hits.max_range_m))
     present = used & np.isfinite(ranges)
-    puff_path = crossings.optical_path_to(np.where(present, ranges, 0.0))
+    limits = np.where(present, ranges, 0.0)
+    puff_path = np.zeros(ranges.shape)  # an unused sub-ray's limit 0 would add exactly 0
+    puff_path[:, 0] = crossings.optical_path_to(limits[:, 0])
+    if len(edge_rows):
+        puff_path[edge_rows, 1:] = crossings.optical_path_to(limits[edge_rows, 1:], edge_rows)
     optical_path = factor[:, None] * (region_path + puff_path)
     extinction = beams.scene.density_to_extinction
     log_each = log_target_echo(reflectivity, cos_factor, ranges, optical_path, extinction, receiver, params)
