@@ -69,7 +69,9 @@ def edge_strength(column: np.ndarray, angles_rad: np.ndarray, smoke_distance_m: 
     spacing = np.abs(angles[2:] - angles[:-2]) * np.maximum(smoke_distance_m, 0.1)
     with np.errstate(divide="ignore", invalid="ignore"):
         relative = np.abs(padded[2:] - padded[:-2]) / (spacing * column)
-    return np.clip(np.nan_to_num(relative * length_m, nan=0.0, posinf=1.0), 0.0, 1.0)
+    strength = relative * length_m
+    strength[np.isnan(strength)] = 0.0  # no smoke on either side
+    return np.minimum(np.maximum(strength, 0.0), 1.0)  # +inf (smoke only on one side) → 1
 
 
 def fluctuation_factor(
