@@ -10,7 +10,11 @@ particles touching the bounding box of all beam segments take part.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
+
+from emulator.optics.kept import KeptPerArrays
 
 PAIRS_PER_CHUNK = 250_000  # beams × particles tested at once by the general test (bounds temporaries)
 _COPLANAR = 1e-9  # |d·n| below this: the beams lie in one plane
@@ -25,11 +29,10 @@ def candidate_pairs(
     if len(origins) == 0 or len(centers) == 0:
         return nothing, nothing
     near = np.flatnonzero(_touches_beam_box(origins, directions, beam_end, centers, radius))
-    if np.all(origins == origins[0]):
-        normal = _fan_normal(directions)
-        if normal is not None:
-            beam, particle = _fan_pairs(origins[0], directions, beam_end, normal, centers[near], radius[near])
-            return beam, near[particle]
+    fan = _FANS.get((origins, directions), None, lambda: _fan_of(origins, directions))
+    if fan is not None:
+        beam, particle = _fan_pairs(fan, origins[0], directions, beam_end, centers[near], radius[near])
+        return beam, near[particle]
     step = max(1, PAIRS_PER_CHUNK // len(origins))
     beams, particles = [nothing], [nothing]
     for start in range(0, len(near), step):
@@ -61,24 +64,51 @@ def _fan_normal(directions: np.ndarray) -> np.ndarray | None:
     return normal if np.abs(directions @ normal).max() <= _COPLANAR else None
 
 
+@dataclass(frozen=True)
+class _Fan:
+    """Beams from one origin in one plane: its unit `normal`, two axes in it, and the beams
+    sorted by angle (`order`) with their sorted angles three times (−2π, 0, +2π)."""
+
+    normal: np.ndarray
+    first: np.ndarray
+    second: np.ndarray
+    order: np.ndarray
+    angles: np.ndarray
+
+
+_FANS = KeptPerArrays()
+
+
+def _fan_of(origins: np.ndarray, directions: np.ndarray) -> _Fan | None:
+    """The beams' fan, or None if they have several origins or span space."""
+    if not np.all(origins == origins[0]):
+        return None
+    normal = _fan_normal(directions)
+    if normal is None:
+        return None
+    first = directions[0]
+    second = np.cross(normal, first)
+    beam_angle = np.arctan2(directions @ second, directions @ first)
+    order = np.argsort(beam_angle, kind="stable")
+    # the sorted angles three times so an interval that wraps around ±π is one slice
+    angles = np.concatenate([beam_angle[order] - 2 * np.pi, beam_angle[order], beam_angle[order] + 2 * np.pi])
+    for array in (normal, second, order, angles):
+        array.flags.writeable = False  # kept and shared by later scans
+    return _Fan(normal, first, second, order, angles)
+
+
 def _fan_pairs(
+    fan: _Fan,
     origin: np.ndarray,
     directions: np.ndarray,
     beam_end: np.ndarray,
-    normal: np.ndarray,
     centers: np.ndarray,
     radius: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Beams from one origin in one plane: each sphere's circle in that plane covers an interval of
     angles; of those pairs, the ones whose sphere starts before the beam's end."""
-    first = directions[0]
-    second = np.cross(normal, first)
-    beam_angle = np.arctan2(directions @ second, directions @ first)
-    order = np.argsort(beam_angle, kind="stable")
+    normal, first, second, order, angles = fan.normal, fan.first, fan.second, fan.order, fan.angles
     count = len(order)
-    # the sorted angles three times (−2π, 0, +2π) so an interval that wraps around ±π is one slice
-    angles = np.concatenate([beam_angle[order] - 2 * np.pi, beam_angle[order], beam_angle[order] + 2 * np.pi])
-
     offset = centers - origin
     height = offset @ normal
     circle_squared = radius * radius - height * height  # the sphere's circle in the beams' plane

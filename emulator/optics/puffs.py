@@ -20,11 +20,11 @@ beams x puffs; only (beam, puff) pairs within `REACH_SIGMAS` are kept.
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass
 
 import numpy as np
 
+from emulator.optics.kept import KeptPerArrays
 from emulator.scene.plumes import Particles
 
 SIGMA_PER_EDGE = 1.0 / np.sqrt(2.0 * np.pi)
@@ -226,23 +226,12 @@ class _Fan:
     beam_angle: np.ndarray
 
 
-_FANS: dict[tuple[int, int], tuple[weakref.ref, weakref.ref, _Fan | None]] = {}
-_FANS_KEPT = 64
+_FANS = KeptPerArrays()
 
 
 def _fan_of(origins: np.ndarray, directions: np.ndarray) -> _Fan | None:
-    """The beams' fan, or None if they are no fan. Kept for read-only beam arrays: a sensor's
-    beams are the same arrays every scan."""
-    key = (id(origins), id(directions))
-    kept = _FANS.get(key)
-    if kept is not None and kept[0]() is origins and kept[1]() is directions:
-        return kept[2]
-    fan = _fan_geometry(origins, directions)
-    if not origins.flags.writeable and not directions.flags.writeable:
-        if len(_FANS) >= _FANS_KEPT:
-            _FANS.clear()
-        _FANS[key] = (weakref.ref(origins), weakref.ref(directions), fan)
-    return fan
+    """The beams' fan, or None if they are no fan; kept for a sensor's read-only beam arrays."""
+    return _FANS.get((origins, directions), None, lambda: _fan_geometry(origins, directions))
 
 
 def _fan_geometry(origins: np.ndarray, directions: np.ndarray) -> _Fan | None:

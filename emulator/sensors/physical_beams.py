@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from emulator.optics import BeamHits, World
+from emulator.optics.kept import KeptPerArrays
 from emulator.optics.puffs import BeamPuffCrossings, Puffs, cross_beams
 from emulator.scene.material_optics import optics_for, patch_values
 from emulator.sensors.beam_geometry import scan_plane_rays
@@ -126,23 +127,17 @@ class _SurfaceGeometry:
     edge_rows: np.ndarray
 
 
-_GEOMETRY_KEPT = 64
-_GEOMETRIES: dict[tuple, tuple[weakref.ref, weakref.ref, _SurfaceGeometry]] = {}
+_GEOMETRIES = KeptPerArrays()
 
 
 def _surface_geometry(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, params: PhysicalParams) -> _SurfaceGeometry:
-    """`_footprint_surfaces`, kept while the beams are the same read-only arrays (a sensor's prepared
-    beams: `World.prepare`), since objects never move."""
-    key = (id(hits.solid_range_m), id(beams.angles_rad), receiver, params, beams.scene.seed)
-    kept = _GEOMETRIES.get(key)
-    if kept is not None and kept[0]() is hits.solid_range_m and kept[1]() is beams.angles_rad:
-        return kept[2]
-    geometry = _footprint_surfaces(hits, beams, receiver, params)
-    if not hits.solid_range_m.flags.writeable and not beams.angles_rad.flags.writeable:
-        if len(_GEOMETRIES) >= _GEOMETRY_KEPT:
-            _GEOMETRIES.clear()
-        _GEOMETRIES[key] = (weakref.ref(hits.solid_range_m), weakref.ref(beams.angles_rad), geometry)
-    return geometry
+    """`_footprint_surfaces`, kept for a sensor's prepared beams (`World.prepare`: read-only arrays
+    reused by every scan), since objects never move."""
+    return _GEOMETRIES.get(
+        (hits.solid_range_m, beams.angles_rad),
+        (receiver, params, beams.scene.seed),
+        lambda: _footprint_surfaces(hits, beams, receiver, params),
+    )
 
 
 def _footprint_surfaces(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, params: PhysicalParams) -> _SurfaceGeometry:

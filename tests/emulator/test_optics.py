@@ -291,3 +291,27 @@ def test_a_tilted_full_circle_fan_finds_every_particle(roll, pitch, yaw, seed, b
     np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12)  # the same to rounding
     if beams >= 256 and not np.all(expected == 0.0):  # unless the origin is in a box: particles and open air
         assert np.any((expected > 0) & np.isfinite(expected)) and np.any(np.isinf(expected))
+
+
+def test_kept_values_follow_the_identity_of_read_only_arrays():
+    from emulator.optics.kept import KeptPerArrays
+
+    kept, calls = KeptPerArrays(), []
+
+    def compute(array):
+        calls.append(1)
+        return float(array.sum())
+
+    frozen = np.arange(4.0)
+    frozen.flags.writeable = False
+    assert kept.get((frozen,), "a", lambda: compute(frozen)) == 6.0
+    assert kept.get((frozen,), "a", lambda: compute(frozen)) == 6.0 and len(calls) == 1
+    assert kept.get((frozen,), "b", lambda: compute(frozen)) == 6.0 and len(calls) == 2  # another extra key
+    twin = np.arange(4.0)
+    twin.flags.writeable = False
+    kept.get((twin,), "a", lambda: compute(twin))  # equal contents, another array: computed again
+    assert len(calls) == 3
+    writeable = np.ones(3)
+    kept.get((writeable,), "a", lambda: compute(writeable))
+    writeable[0] = 5.0  # never kept: a change is seen
+    assert kept.get((writeable,), "a", lambda: compute(writeable)) == 7.0 and len(calls) == 5
