@@ -47,10 +47,16 @@ def _touches_beam_box(
     origins: np.ndarray, directions: np.ndarray, beam_end: np.ndarray, centers: np.ndarray, radius: np.ndarray
 ) -> np.ndarray:
     """Mask of the spheres whose bounding cube touches the bounding box of all beam segments."""
-    ends = origins + directions * beam_end[:, None]
-    lower = np.minimum(origins.min(axis=0), ends.min(axis=0))
-    upper = np.maximum(origins.max(axis=0), ends.max(axis=0))
+    lower, upper = _BOXES.get((origins, directions, beam_end), None, lambda: _segments_box(origins, directions, beam_end))
     return np.all((centers + radius[:, None] >= lower) & (centers - radius[:, None] <= upper), axis=1)
+
+
+_BOXES = KeptPerArrays()
+
+
+def _segments_box(origins: np.ndarray, directions: np.ndarray, beam_end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    ends = origins + directions * beam_end[:, None]
+    return np.minimum(origins.min(axis=0), ends.min(axis=0)), np.maximum(origins.max(axis=0), ends.max(axis=0))
 
 
 def _fan_normal(directions: np.ndarray) -> np.ndarray | None:

@@ -51,6 +51,7 @@ class PreparedBeams:
     cos_incidence: np.ndarray
     region_intervals: tuple[tuple[np.ndarray, np.ndarray], ...]
     region_lengths: tuple[np.ndarray, ...]
+    beam_end_m: np.ndarray  # as BeamHits.beam_end_m
 
 
 @dataclass(frozen=True)
@@ -61,6 +62,8 @@ class BeamHits:
         max_range_m; object_index: its object (index into scene.objects), -1 if
         none; reflectivity: its material's reflectivity (0 if none);
         cos_incidence: |cos| of the angle between beam and surface normal (0 if none).
+    beam_end_m: where each beam stops: the solid hit, or max_range_m when
+        nothing solid is in reach.
     region_optical_path: ∫ density ds over all smoke regions from the origin
         up to the solid hit, or to max_range_m when there is none (d·m);
         overlapping regions add. `regions` holds each region's intervals.
@@ -76,6 +79,7 @@ class BeamHits:
     object_index: np.ndarray
     reflectivity: np.ndarray
     cos_incidence: np.ndarray
+    beam_end_m: np.ndarray
     region_optical_path: np.ndarray
     regions: tuple[RegionCrossing, ...]
     first_particle: Callable[[], tuple[np.ndarray, np.ndarray]] = field(repr=False, compare=False)
@@ -94,8 +98,3 @@ class BeamHits:
     @property
     def plume_hit_density(self) -> np.ndarray:
         return self._first_particle_hits[1]
-
-    @property
-    def beam_end_m(self) -> np.ndarray:
-        """Where each beam stops: the solid hit, or max_range_m when nothing solid is in reach."""
-        return np.minimum(self.solid_range_m, self.max_range_m)

@@ -299,9 +299,16 @@ def _dot(vectors: np.ndarray, axis: np.ndarray) -> np.ndarray:
 
 def _near_segments(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray) -> Puffs:
     """The puffs within reach of the box bounding all beam segments (a cheap first cut)."""
-    ends = origins + directions * np.where(np.isfinite(beam_end_m), beam_end_m, 0.0)[:, None]
-    lower = np.minimum(origins.min(axis=0), ends.min(axis=0))
-    upper = np.maximum(origins.max(axis=0), ends.max(axis=0))
+    lower, upper = _BOXES.get((origins, directions, beam_end_m), None, lambda: _segments_box(origins, directions, beam_end_m))
     reach = REACH_SIGMAS * puffs.sigma[:, None]
     keep = np.all((puffs.centers + reach >= lower) & (puffs.centers - reach <= upper), axis=1)
     return Puffs(puffs.centers[keep], puffs.sigma[keep], puffs.peak_density[keep])
+
+
+_BOXES = KeptPerArrays()
+
+
+def _segments_box(origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper corner of the box bounding all beam segments (an infinite beam counts to its origin)."""
+    ends = origins + directions * np.where(np.isfinite(beam_end_m), beam_end_m, 0.0)[:, None]
+    return np.minimum(origins.min(axis=0), ends.min(axis=0)), np.maximum(origins.max(axis=0), ends.max(axis=0))

@@ -94,12 +94,13 @@ class World:
         intervals = tuple(
             self._region_intervals(i, origins, directions, max_range_m) for i in range(len(self.scene.regions))
         )
-        for array in (solid_range, object_index, reflectivity, cos_incidence):
-            array.flags.writeable = False  # shared by every scan of these beams
         beam_end = np.minimum(solid_range, max_range_m)
+        for array in (solid_range, object_index, reflectivity, cos_incidence, beam_end):
+            array.flags.writeable = False  # shared by every scan of these beams
         lengths = tuple(RegionCrossing(i, 0.0, *interval).length_before(beam_end) for i, interval in enumerate(intervals))
         return PreparedBeams(
-            origins, directions, max_range_m, solid_range, object_index, reflectivity, cos_incidence, intervals, lengths
+            origins, directions, max_range_m, solid_range, object_index, reflectivity, cos_incidence, intervals, lengths,
+            beam_end,
         )
 
     def cast_prepared(self, prepared: PreparedBeams, time_s: float) -> BeamHits:
@@ -112,7 +113,7 @@ class World:
         for crossing, length in zip(regions, prepared.region_lengths):
             if crossing.density:
                 optical_path += crossing.density * length
-        beam_end = np.minimum(prepared.solid_range_m, prepared.max_range_m)
+        beam_end = prepared.beam_end_m
         return BeamHits(
             time_s=time_s,
             max_range_m=prepared.max_range_m,
@@ -120,6 +121,7 @@ class World:
             object_index=prepared.object_index,
             reflectivity=prepared.reflectivity,
             cos_incidence=prepared.cos_incidence,
+            beam_end_m=beam_end,
             region_optical_path=optical_path,
             regions=regions,
             first_particle=lambda: self._first_particle(prepared.origins, prepared.directions, beam_end, time_s),
