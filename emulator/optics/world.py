@@ -95,9 +95,10 @@ class World:
             self._region_intervals(i, origins, directions, max_range_m) for i in range(len(self.scene.regions))
         )
         beam_end = np.minimum(solid_range, max_range_m)
-        for array in (solid_range, object_index, reflectivity, cos_incidence, beam_end):
-            array.flags.writeable = False  # shared by every scan of these beams
         lengths = tuple(RegionCrossing(i, 0.0, *interval).length_before(beam_end) for i, interval in enumerate(intervals))
+        shared = (solid_range, object_index, reflectivity, cos_incidence, beam_end, *lengths, *sum(intervals, ()))
+        for array in shared:
+            array.flags.writeable = False  # shared by every scan of these beams
         return PreparedBeams(
             origins, directions, max_range_m, solid_range, object_index, reflectivity, cos_incidence, intervals, lengths,
             beam_end,
