@@ -1,7 +1,8 @@
-"""The bundled scenes that reproduce the paper's experiments: `bocas` (§3.1, Fig. 5) and `marulan` (§2, Fig. 3/10)."""
+"""The bundled scenes of the paper: `bocas` (§3.1, Fig. 5), `marulan` (§2, Fig. 3/10) and `railway` (§1, Fig. 1)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -179,3 +180,26 @@ def test_validation_report_is_deterministic_and_states_the_onset(tmp_path: Path,
     assert len(reports[0][2]) == 5
     for link in ("figures/bocas_fig5_saturation_and_ranges.png", "figures/marulan_fig10_waterfall.png"):
         assert f"]({link})" in text
+
+
+def test_railway_smouldering_car_end_blanks_the_urg_but_not_the_lms() -> None:
+    """The paper's two smoke types in the 2009 scene: a smoke area the URG cannot see through (§4.1, §4.3)."""
+    scene = load_scene("railway")
+    (car_end,) = [region for region in scene.regions if region.name == "car_end_smoke"]
+    clear_air = dataclasses.replace(scene, plumes=(), regions=())
+    only_car_end = dataclasses.replace(scene, plumes=(), regions=(car_end,))
+    for name, blanked in (("urg", True), ("lms", False)):
+        before = create_sensor(only_car_end, name).scan(4.0).values
+        after = create_sensor(only_car_end, name).scan(30.0).values
+        clear = create_sensor(clear_air, name).scan(30.0).values
+        assert np.array_equal(before, clear)
+        assert bool(np.count_nonzero(after != clear) >= 10) == blanked
+    urg_after = create_sensor(only_car_end, "urg").scan(30.0).values
+    assert set(urg_after[urg_after != create_sensor(clear_air, "urg").scan(30.0).values].tolist()) == {URG_LOW_INTENSITY}
+
+
+def test_railway_fallen_mast_lies_between_the_two_scan_planes() -> None:
+    scene = load_scene("railway")
+    (mast,) = [obj for obj in scene.objects if obj.name == "fallen_mast"]
+    top = mast.pose.position[2] + mast.shape.radius
+    assert scene.sensor("urg").pose.position[2] < top < scene.sensor("lms").pose.position[2]
