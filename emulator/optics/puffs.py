@@ -57,7 +57,8 @@ def normal_cdf(x: np.ndarray) -> np.ndarray:
     """
     position = np.multiply(x, 1.0 / _CDF_STEP)
     position += _CDF_LIMIT / _CDF_STEP
-    np.clip(position, 0.0, _CDF_LAST, out=position)
+    np.maximum(position, 0.0, out=position)  # np.clip's Python wrapper costs more than these two ufuncs
+    np.minimum(position, _CDF_LAST, out=position)
     index = position.astype(np.intp)
     position -= index
     position *= _CDF_SLOPE.take(index)
@@ -269,7 +270,7 @@ def _fan_pairs(puffs: Puffs, origins: np.ndarray, directions: np.ndarray) -> tup
     distance = np.hypot(x, y)
     around_origin = distance <= in_plane
     with np.errstate(divide="ignore", invalid="ignore"):
-        half_width = np.where(around_origin, np.pi, np.arcsin(np.clip(in_plane / distance, 0.0, 1.0)))
+        half_width = np.where(around_origin, np.pi, np.arcsin(np.minimum(np.maximum(in_plane / distance, 0.0), 1.0)))
     centre = np.arctan2(y, x)
     beams, puff_of = [], []
     wraps = bool(np.any(centre - half_width <= -np.pi) or np.any(centre + half_width >= np.pi))

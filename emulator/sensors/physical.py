@@ -77,7 +77,7 @@ def lms_values(hits: BeamHits, beams: Beams, unit: str, params: PhysicalParams =
     seen = np.isfinite(echo_m)
     if params.noise:
         rng = scan_rng(beams.scene.seed, beams.sensor.name, beams.time_s)
-        echo_m = echo_m + lms_range_error_m(rng, beams.scene.seed, beams.sensor.name, np.degrees(beams.angles_rad) + 90.0)
+        echo_m = echo_m + lms_range_error_m(rng, beams.scene.seed, beams.sensor.name, beams.angles_rad)
     counts = np.rint(np.where(seen, np.maximum(echo_m, 0.0), 0.0) * lms200.UNITS_PER_M[unit]).astype(np.int64)
     values = np.where(counts >= lms200.ABOVE_MAXIMUM, lms200.ABOVE_MAXIMUM, counts)
     values = np.where(clean, values, LMS_SIGNAL_TO_NOISE)

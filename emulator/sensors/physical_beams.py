@@ -9,6 +9,7 @@ footprint meets (sub-rays at depth edges), each with its optical path.
 
 from __future__ import annotations
 
+import functools
 import weakref
 from dataclasses import dataclass
 
@@ -248,9 +249,16 @@ def _material_arrays(beams: Beams, objects: np.ndarray, params: PhysicalParams) 
 
 def bin_fractions(params: PhysicalParams) -> np.ndarray:
     """Bin edges as fractions of a beam's smoke extent, each bin `bin_growth` times the previous:
-    fine where the smoke begins, where a first echo forms in dense smoke."""
-    widths = params.bin_growth ** np.arange(params.bins)
-    return np.concatenate([[0.0], np.cumsum(widths) / widths.sum()])
+    fine where the smoke begins, where a first echo forms in dense smoke. Read-only, computed once."""
+    return _bin_fractions(params.bins, params.bin_growth)
+
+
+@functools.lru_cache(maxsize=16)
+def _bin_fractions(bins: int, growth: float) -> np.ndarray:
+    widths = growth ** np.arange(bins)
+    fractions = np.concatenate([[0.0], np.cumsum(widths) / widths.sum()])
+    fractions.flags.writeable = False
+    return fractions
 
 
 def _smoke_echoes(
@@ -269,8 +277,8 @@ def _smoke_echoes(
     edges = low[:, None] + (high - low)[:, None] * fractions
     puff_path = crossings.optical_path_on_grid(rows, low, high - low, fractions)
     path = factor[rows, None] * (_region_path_to(hits, rows, edges) + puff_path)
-    width = np.diff(edges, axis=1)
-    local_extinction = extinction * np.diff(path, axis=1) / np.where(width > 0, width, 1.0)
+    width = edges[:, 1:] - edges[:, :-1]
+    local_extinction = extinction * (path[:, 1:] - path[:, :-1]) / np.where(width > 0, width, 1.0)
     multiple_scattering = 1.0 + (local_extinction / params.multiple_scattering_extinction) ** 3
     share = receiver.volume_gain * params.backscatter_ratio * multiple_scattering
     transmission = np.exp(-2.0 * extinction * path)

@@ -13,6 +13,7 @@ in the extinction: beta/2 · (exp(-2k OP_a) - exp(-2k OP_b)) · G(mid).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,15 +23,22 @@ from emulator.sensors.physical_params import SPEED_OF_LIGHT_M_S, LmsReceiver, Ph
 
 def range_law(range_m: np.ndarray, receiver: ReceiverOptics, params: PhysicalParams) -> np.ndarray:
     """G(u): inverse-square spreading × transmitter/receiver overlap × gain ramp, 1 at the reference range."""
+    overlap_m, gain_ramp_m = receiver.overlap_m, receiver.gain_ramp_m
+    return _spreading(range_m, overlap_m, gain_ramp_m) / _reference_spreading(params.reference_range_m, overlap_m, gain_ramp_m)
 
-    def raw(u: np.ndarray | float) -> np.ndarray:
-        u = np.asarray(u, dtype=float)
-        spreading = u * u / (u * u + receiver.overlap_m**2) ** 2
-        if receiver.gain_ramp_m > 0:
-            spreading = spreading * np.minimum(u / receiver.gain_ramp_m, 1.0) ** 2
-        return spreading
 
-    return raw(range_m) / raw(params.reference_range_m)
+def _spreading(range_m: np.ndarray | float, overlap_m: float, gain_ramp_m: float) -> np.ndarray:
+    u = np.asarray(range_m, dtype=float)
+    spreading = u * u / (u * u + overlap_m**2) ** 2
+    if gain_ramp_m > 0:
+        spreading = spreading * np.minimum(u / gain_ramp_m, 1.0) ** 2
+    return spreading
+
+
+@functools.lru_cache(maxsize=16)
+def _reference_spreading(reference_range_m: float, overlap_m: float, gain_ramp_m: float) -> float:
+    """The range law's normaliser: the same for every scan, so computed once."""
+    return float(_spreading(reference_range_m, overlap_m, gain_ramp_m))
 
 
 def log_threshold(receiver: ReceiverOptics, params: PhysicalParams, extinction_per_density: float) -> float:
@@ -143,7 +151,7 @@ def _crossing_on_grid(cumulative: np.ndarray, edges_m: np.ndarray, level: float)
     low, high = cumulative[rows, previous], cumulative[rows, index]
     with np.errstate(divide="ignore", invalid="ignore"):
         fraction = np.where(high > low, (level - low) / (high - low), 1.0)
-    at = edges_m[rows, previous] + np.clip(fraction, 0.0, 1.0) * (edges_m[rows, index] - edges_m[rows, previous])
+    at = edges_m[rows, previous] + np.minimum(np.maximum(fraction, 0.0), 1.0) * (edges_m[rows, index] - edges_m[rows, previous])
     return np.where(any_reached, np.where(index == 0, edges_m[:, 0], at), np.inf)
 
 
@@ -200,8 +208,8 @@ def lms_first_echo(
         return at[:, : points_m.shape[1]] - at[:, points_m.shape[1] :]
 
     order = np.argsort(np.where(target_amp > 0, target_range_m, np.inf), axis=1)
-    ranges = np.take_along_axis(target_range_m, order, axis=1)
-    amps = np.take_along_axis(target_amp, order, axis=1)
+    order += (np.arange(len(order)) * order.shape[1])[:, None]  # row-major flat positions
+    ranges, amps = target_range_m.ravel()[order], target_amp.ravel()[order]
     windows = smoke_window(np.concatenate([edges_m, ranges], axis=1))  # the bin edges and the surfaces at once
     smoke_at = _crossing_on_grid(windows[:, : edges_m.shape[1]], edges_m, threshold)
     energy_at_target = windows[:, edges_m.shape[1] :] + np.cumsum(amps, axis=1)

@@ -11,6 +11,7 @@ import zlib
 
 import numpy as np
 
+from emulator.optics.kept import KeptPerArrays
 from emulator.scene.plumes import splitmix64
 from emulator.sensors.physical_params import LMS_SIGMA_M, LMS_SYSTEMATIC_M, PhysicalParams, urg_noise_sigma_m
 
@@ -96,12 +97,23 @@ def urg_range_noise_m(rng: np.random.Generator, range_m: np.ndarray) -> np.ndarr
     return rng.standard_normal(len(range_m)) * urg_noise_sigma_m(np.where(np.isfinite(range_m), range_m, 0.0))
 
 
-def lms_range_error_m(rng: np.random.Generator, seed: int, sensor: str, device_angles_deg: np.ndarray) -> np.ndarray:
-    """LMS200 error: a fixed systematic offset per beam direction (uniform in ±15 mm) plus σ = 5 mm noise."""
+def lms_range_error_m(rng: np.random.Generator, seed: int, sensor: str, angles_rad: np.ndarray) -> np.ndarray:
+    """LMS200 error at sensor-frame `angles_rad`: a fixed systematic offset per beam direction
+    (uniform in ±15 mm) plus σ = 5 mm noise."""
+    systematic = _SYSTEMATIC.get((angles_rad,), (seed, sensor), lambda: _lms_systematic_m(seed, sensor, np.degrees(angles_rad) + 90.0))
+    return systematic + rng.standard_normal(len(angles_rad)) * LMS_SIGMA_M
+
+
+_SYSTEMATIC = KeptPerArrays()
+
+
+def _lms_systematic_m(seed: int, sensor: str, device_angles_deg: np.ndarray) -> np.ndarray:
+    """The fixed offset per device angle (quarter degrees), kept for a sensor's read-only angles."""
     quarter_degrees = np.rint(np.asarray(device_angles_deg) * 4.0).astype(np.int64).astype(np.uint64)
     key = np.uint64(zlib.crc32(sensor.encode()) ^ (seed % 2**32) << 32) ^ np.uint64(_BIAS_STREAM)
     with np.errstate(over="ignore"):
         bits = splitmix64(quarter_degrees ^ key)
     uniform = (bits >> np.uint64(11)).astype(np.float64) * 2.0**-53
     systematic = LMS_SYSTEMATIC_M * (2.0 * uniform - 1.0)
-    return systematic + rng.standard_normal(len(quarter_degrees)) * LMS_SIGMA_M
+    systematic.flags.writeable = False
+    return systematic
