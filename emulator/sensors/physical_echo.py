@@ -155,19 +155,23 @@ def _crossing_on_grid(cumulative: np.ndarray, edges_m: np.ndarray, level: float)
     return np.where(any_reached, np.where(index == 0, edges_m[:, 0], at), np.inf)
 
 
-def _cumulative_at(cumulative: np.ndarray, edges_m: np.ndarray, points_m: np.ndarray) -> np.ndarray:
-    """Cumulative smoke energy at `points_m` (N, S), linear within each bin.
+def _edge_fractions(edges_m: np.ndarray) -> np.ndarray:
+    """The bin edges as fractions of a beam's extent, read off the widest beam.
 
     Every row's bin edges are the same fractions of its own extent (only the
     start and length differ), so one binary search on those fractions serves all rows.
     """
+    length = edges_m[:, -1] - edges_m[:, 0]
+    widest = int(np.argmax(length)) if len(length) else 0
+    if len(length) and length[widest] > 0:
+        return (edges_m[widest] - edges_m[widest, :1]) / length[widest : widest + 1]
+    return np.linspace(0.0, 1.0, edges_m.shape[1])
+
+
+def _cumulative_at(cumulative: np.ndarray, edges_m: np.ndarray, fractions: np.ndarray, points_m: np.ndarray) -> np.ndarray:
+    """Cumulative smoke energy at `points_m` (N, S), linear within each bin (edges at `fractions` of each extent)."""
     start, stop = edges_m[:, :1], edges_m[:, -1:]
     length = stop - start
-    widest = int(np.argmax(length[:, 0])) if len(length) else 0
-    if len(length) and length[widest, 0] > 0:
-        fractions = (edges_m[widest] - start[widest]) / length[widest]
-    else:
-        fractions = np.linspace(0.0, 1.0, edges_m.shape[1])
     bins = cumulative.shape[1] - 1
     along = (np.where(np.isfinite(points_m), points_m, stop) - start) / np.where(length > 0, length, 1.0)
     along = np.minimum(np.maximum(along, 0.0), 1.0)
@@ -198,21 +202,31 @@ def lms_first_echo(
     threshold = float(np.exp(log_threshold_value))
     cumulative = np.concatenate([np.zeros((len(smoke_amp), 1)), np.cumsum(smoke_amp, axis=1)], axis=1)
 
-    no_smoke = not cumulative.any()
+    span = cumulative.max(axis=1) - cumulative.min(axis=1)  # cumulative starts at 0: span 0 means no smoke energy
+    smoky = np.flatnonzero(span > 0)  # every other row's windows hold exactly 0
+    # a window holds at most the span (to within a few ulps): only these rows can trigger on smoke
+    reachable = np.flatnonzero(span >= threshold * (1.0 - 1e-9))
+    fractions = _edge_fractions(edges_m)
+
+    def rows_window(rows: np.ndarray, points_m: np.ndarray) -> np.ndarray:
+        """Smoke energy within the window ending at each point (R, K) of `rows`: one interpolation for both ends."""
+        at = _cumulative_at(cumulative[rows], edges_m[rows], fractions, np.concatenate([points_m, points_m - receiver.window_m], axis=1))
+        return at[:, : points_m.shape[1]] - at[:, points_m.shape[1] :]
 
     def smoke_window(points_m: np.ndarray) -> np.ndarray:
-        """Smoke energy within the window ending at each point: one interpolation for both ends."""
-        if no_smoke:
-            return np.zeros(points_m.shape)
-        at = _cumulative_at(cumulative, edges_m, np.concatenate([points_m, points_m - receiver.window_m], axis=1))
-        return at[:, : points_m.shape[1]] - at[:, points_m.shape[1] :]
+        """The same for every row's points (N, K)."""
+        windows = np.zeros(points_m.shape)
+        if len(smoky):
+            windows[smoky] = rows_window(smoky, points_m[smoky])
+        return windows
 
     order = np.argsort(np.where(target_amp > 0, target_range_m, np.inf), axis=1)
     order += (np.arange(len(order)) * order.shape[1])[:, None]  # row-major flat positions
     ranges, amps = target_range_m.ravel()[order], target_amp.ravel()[order]
-    windows = smoke_window(np.concatenate([edges_m, ranges], axis=1))  # the bin edges and the surfaces at once
-    smoke_at = _crossing_on_grid(windows[:, : edges_m.shape[1]], edges_m, threshold)
-    energy_at_target = windows[:, edges_m.shape[1] :] + np.cumsum(amps, axis=1)
+    smoke_at = np.full(len(ranges), np.inf)
+    if len(reachable):
+        smoke_at[reachable] = _crossing_on_grid(rows_window(reachable, edges_m[reachable]), edges_m[reachable], threshold)
+    energy_at_target = smoke_window(ranges) + np.cumsum(amps, axis=1)
     reached = (energy_at_target >= threshold) & (amps > 0)
     rows = np.arange(len(ranges))
     first_target = np.argmax(reached, axis=1)
