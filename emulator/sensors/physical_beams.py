@@ -9,6 +9,7 @@ footprint meets (sub-rays at depth edges), each with its optical path.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import weakref
 from dataclasses import dataclass
@@ -67,13 +68,15 @@ def beam_physics(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, params:
     extinction = scene.density_to_extinction
     beam_end = hits.beam_end_m
     crossings = cross_beams(Puffs.from_particles(beams.world.particles_at(beams.time_s)), beams.origins, beams.directions, beam_end)
-    column = hits.region_optical_path + crossings.optical_path_to(beam_end)
+    geometry = _surface_geometry(hits, beams, receiver, params)
+    puff_to_end_and_surface = crossings.optical_path_to(geometry.end_and_surface_m)  # one pass for both limits
+    column = hits.region_optical_path + puff_to_end_and_surface[:, 0]
     smoke_start, smoke_end = _smoke_extent(hits, crossings, beam_end)
     with np.errstate(invalid="ignore"):
         smoke_distance = np.where(np.isfinite(smoke_start), 0.5 * (smoke_start + np.minimum(smoke_end, beam_end)), 1.0)
     factor = fluctuation_factor(scene.seed, beams.sensor.name, beams.angles_rad, beams.time_s, column, smoke_distance, params)
-    surfaces = _surfaces(hits, beams, crossings, factor, receiver, params)
-    far_end = np.where(surfaces.present.any(axis=1), np.where(surfaces.present, surfaces.range_m, 0.0).max(axis=1), beam_end)
+    surfaces = _surfaces(hits, beams, geometry, crossings, puff_to_end_and_surface[:, 1], factor, receiver, params)
+    far_end = np.where(geometry.any_present, np.where(surfaces.present, surfaces.range_m, 0.0).max(axis=1), beam_end)
     smoke = _smoke_echoes(hits, crossings, factor, smoke_start, np.minimum(smoke_end, far_end), extinction, receiver, params)
     return BeamPhysics(surfaces, smoke, factor * column)
 
@@ -126,6 +129,10 @@ class _SurfaceGeometry:
     stretch: np.ndarray
     used: np.ndarray
     edge_rows: np.ndarray
+    present: np.ndarray  # used, with a surface in reach
+    limits: np.ndarray  # range of each present surface, 0 elsewhere (an unused sub-ray's limit 0 adds exactly 0)
+    any_present: np.ndarray  # (N,)
+    end_and_surface_m: np.ndarray  # (N, 2): each beam's end and its central sub-ray's limit
 
 
 _GEOMETRIES = KeptPerArrays()
@@ -135,7 +142,7 @@ def _surface_geometry(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, pa
     """`_footprint_surfaces`, kept for a sensor's prepared beams (`World.prepare`: read-only arrays
     reused by every scan), since objects never move."""
     return _GEOMETRIES.get(
-        (hits.solid_range_m, beams.angles_rad),
+        (hits.solid_range_m, beams.angles_rad, hits.beam_end_m),
         (receiver, params, beams.scene.seed),
         lambda: _footprint_surfaces(hits, beams, receiver, params),
     )
@@ -167,33 +174,38 @@ def _footprint_surfaces(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, 
     if len(patchy[0]):
         points = beams.origins[patchy[0]] + beams.directions[patchy[0]] * ranges[patchy][:, None]
         reflectivity[patchy] *= np.exp(patchiness[patchy] * patch_values(points, beams.scene.seed))
-    geometry = _SurfaceGeometry(ranges, reflectivity, cosine**angle_exponent, stretch, used, edge_rows)
-    for array in (ranges, reflectivity, geometry.cos_factor, stretch, used, edge_rows):
-        array.flags.writeable = False
+    limits = np.where(present, ranges, 0.0)
+    end_and_surface = np.stack([hits.beam_end_m, limits[:, 0]], axis=1)
+    geometry = _SurfaceGeometry(
+        ranges, reflectivity, cosine**angle_exponent, stretch, used, edge_rows, present, limits, present.any(axis=1), end_and_surface
+    )
+    for field in dataclasses.fields(geometry):
+        getattr(geometry, field.name).flags.writeable = False
     return geometry
 
 
 def _surfaces(
     hits: BeamHits,
     beams: Beams,
+    geometry: _SurfaceGeometry,
     crossings: BeamPuffCrossings,
+    puff_to_surface: np.ndarray,
     factor: np.ndarray,
     receiver: ReceiverOptics,
     params: PhysicalParams,
 ) -> Surfaces:
-    geometry = _surface_geometry(hits, beams, receiver, params)
-    ranges, reflectivity, cos_factor, stretch, used = (
-        geometry.ranges, geometry.reflectivity, geometry.cos_factor, geometry.stretch, geometry.used
+    """`geometry`'s surfaces seen through this scan's smoke; `puff_to_surface` is the puffs'
+    optical path to each beam's central sub-ray (N,)."""
+    ranges, reflectivity, cos_factor, stretch, used, present, limits = (
+        geometry.ranges, geometry.reflectivity, geometry.cos_factor, geometry.stretch, geometry.used, geometry.present, geometry.limits
     )
     region_path = np.zeros(ranges.shape)
     region_path[:, 0] = hits.region_optical_path
     edge_rows = geometry.edge_rows
     if len(edge_rows):
         region_path[edge_rows] = _region_path_to(hits, edge_rows, np.minimum(ranges[edge_rows], hits.max_range_m))
-    present = used & np.isfinite(ranges)
-    limits = np.where(present, ranges, 0.0)
     puff_path = np.zeros(ranges.shape)  # an unused sub-ray's limit 0 would add exactly 0
-    puff_path[:, 0] = crossings.optical_path_to(limits[:, 0])
+    puff_path[:, 0] = puff_to_surface
     if len(edge_rows):
         puff_path[edge_rows, 1:] = crossings.optical_path_to(limits[edge_rows, 1:], edge_rows)
     optical_path = factor[:, None] * (region_path + puff_path)
