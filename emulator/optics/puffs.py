@@ -193,10 +193,15 @@ def cross_beams(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_
         return _no_crossings()
     puffs = _near_segments(puffs, origins, directions, beam_end_m)
     fan = _fan_pairs(puffs, origins, directions)
-    beam, puff = fan if fan is not None else _all_pairs(len(origins), len(puffs))
-    offset = puffs.centers[puff] - (origins[0] if fan is not None else origins[beam])  # a fan has one origin
+    if fan is not None:  # a fan has one origin: each puff's offset and distance once, not once per pair
+        beam, puff = fan
+        puff_offset = puffs.centers - origins[0]
+        offset, distance_sq = puff_offset[puff], np.einsum("ij,ij->i", puff_offset, puff_offset)[puff]
+    else:
+        beam, puff = _all_pairs(len(origins), len(puffs))
+        offset = puffs.centers[puff] - origins[beam]
+        distance_sq = np.einsum("ij,ij->i", offset, offset)
     along = np.einsum("ij,ij->i", offset, directions[beam])
-    distance_sq = np.einsum("ij,ij->i", offset, offset)
     miss_sq = np.maximum(distance_sq - along * along, 0.0)
     sigma = puffs.sigma[puff]
     reach = REACH_SIGMAS * sigma
