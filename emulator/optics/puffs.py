@@ -163,13 +163,14 @@ class BeamPuffCrossings:
         inside = past - first
         pair = np.repeat(np.arange(len(beam)), inside)
         grid = np.repeat(first - (np.cumsum(inside) - inside), inside) + np.arange(len(pair))
-        standard = start[pair] + length[pair] * fractions[grid]
+        point = beam[pair] * width + grid  # row-major in (count, width)
+        standard = (start_m[:, None] + length_m[:, None] * fractions).ravel()[point]  # the grid once, not per pair
         standard -= along[pair]
         standard /= sigma[pair]
         contribution = normal_cdf(standard)
         contribution -= _CDF_HEAD
         contribution *= column[pair]
-        result += np.bincount(beam[pair] * width + grid, weights=contribution, minlength=count * width).reshape(count, width)
+        result += np.bincount(point, weights=contribution, minlength=count * width).reshape(count, width)
         return result
 
     def extent_m(self, n_beams: int) -> tuple[np.ndarray, np.ndarray]:
