@@ -22,12 +22,12 @@ from typing import Any
 
 import numpy as np
 
-from emulator.commands.record import scan_series, scan_times
 from emulator.errors import UserError
 from emulator.optics import World
 from emulator.scene import Scene
 from emulator.sensors import create_sensor, ranges_m
 from emulator.sensors.beam_geometry import scan_plane_rays
+from emulator.sensors.series import scan_series, scan_times
 
 SATURATION_CLEAR = 0.8
 SATURATION_PER_DENSITY = math.log(0.8 / 0.14) / 0.0028  # ≈ 622 per density unit

@@ -12,22 +12,18 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from emulator.commands.options import add_scene_options, scene_from_args
 from emulator.errors import UserError
 from emulator.plotting import draw_waterfall, pyplot, sensor_series
-from emulator.sensors.physical import apply_model_override
-from emulator.scene import load_scene
 
 MAX_PIXELS = 8000
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("scene", metavar="SCENE", help="bundled scene name or path to a .toml file")
+    add_scene_options(parser, seed=False)
     parser.add_argument("--sensor", required=True, metavar="NAME", help="the scene's sensor to plot")
     parser.add_argument("--start", type=float, default=0.0, metavar="T0", help="first simulated time (s)")
     parser.add_argument("--end", type=float, required=True, metavar="T1", help="last simulated time (s)")
-    parser.add_argument(
-        "--model", metavar="PRESET", help="smoke/sensor response preset replacing the scene's (formsma2011 or physical)"
-    )
     parser.add_argument("--out", required=True, type=Path, metavar="FILE.png", help="PNG file to write")
     parser.add_argument("--width", type=int, default=1200, metavar="PX", help="image width in pixels")
     parser.add_argument("--height", type=int, default=800, metavar="PX", help="image height in pixels")
@@ -38,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
         if not 200 <= pixels <= MAX_PIXELS:
             raise UserError(f"{name} must be between 200 and {MAX_PIXELS} pixels, got {pixels}")
     pyplot()  # fail before the computation when matplotlib is missing
-    scene = apply_model_override(load_scene(args.scene), args.model)
+    scene = scene_from_args(args)
     series = sensor_series(scene, args.sensor, args.start, args.end)
     try:
         draw_waterfall(series, args.out, width_px=args.width, height_px=args.height)

@@ -11,14 +11,13 @@ An LMS200 starts in the angle, resolution and unit of the log.
 from __future__ import annotations
 
 import argparse
-import asyncio
-import signal
 from pathlib import Path
 
 import numpy as np
 
 from emulator.clock import WallClock
-from emulator.daemon import Daemon, Ready
+from emulator.commands.serve import serve_until_signalled
+from emulator.daemon import Daemon
 from emulator.logfile import Log, read_log
 from emulator.replay import LMS_MODEL, MODELS, URG_MODEL, replay_sensor
 from emulator.scene.model import Pose, Scene, SensorSpec
@@ -63,17 +62,5 @@ def run(args: argparse.Namespace) -> int:
     log = read_log(args.log)
     sensor = replay_sensor(log, args.model, log.header.sensor or DEFAULT_NAMES[args.model])
     scene = replay_scene(log, args.model, args.endpoint)
-    daemon = Daemon(scene, None, WallClock(), sensor_factory=lambda spec: sensor)
-    asyncio.run(_serve(daemon))
+    serve_until_signalled(Daemon(scene, None, WallClock(), sensor_factory=lambda spec: sensor))
     return 0
-
-
-async def _serve(daemon: Daemon) -> None:
-    loop = asyncio.get_running_loop()
-    for signum in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(signum, daemon.stop)
-    await daemon.run(_announce)
-
-
-def _announce(ready: Ready) -> None:
-    print(ready.line, flush=True)

@@ -1,4 +1,4 @@
-"""`lrf-emulator scan SCENE --sensor NAME [--time T] [--seed N]`: one scan as JSON (CLI.md).
+"""`lrf-emulator scan SCENE --sensor NAME [--time T] [--seed N] [--model PRESET]`: one scan as JSON (CLI.md).
 
 The URG-04LX gives all 769 steps (0..768; steps outside 44..725 carry the
 sensor's out-of-area value); the LMS200 the scan its scene options select
@@ -8,13 +8,12 @@ sensor's out-of-area value); the LMS200 the scan its scene options select
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import sys
 
 import numpy as np
 
-from emulator.scene import load_scene
+from emulator.commands.options import add_scene_options, scene_from_args
 from emulator.sensors import Scan, create_sensor, ranges_m
 
 
@@ -22,10 +21,9 @@ ANGLE_DECIMALS = 9  # the devices' angles are exact in far fewer digits; drop fl
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("scene", metavar="SCENE", help="bundled scene name or path to a .toml file")
+    add_scene_options(parser)
     parser.add_argument("--sensor", required=True, metavar="NAME", help="the scene's sensor to scan with")
     parser.add_argument("--time", type=float, default=0.0, metavar="T", help="simulated time in seconds (default 0)")
-    parser.add_argument("--seed", type=int, default=None, metavar="N", help="override the scene's seed")
 
 
 def scan_json(scan: Scan) -> dict:
@@ -42,9 +40,7 @@ def scan_json(scan: Scan) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    scene = load_scene(args.scene)
-    if args.seed is not None:
-        scene = dataclasses.replace(scene, seed=args.seed)
+    scene = scene_from_args(args)
     scan = create_sensor(scene, args.sensor).configured_scan(args.time)
     json.dump(scan_json(scan), sys.stdout)
     sys.stdout.write("\n")

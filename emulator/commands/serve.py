@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import dataclasses
 import signal
 import sys
 
 from emulator.clock import WallClock
+from emulator.commands.options import add_scene_options, scene_from_args
 from emulator.daemon import Daemon, Ready
 from emulator.errors import UserError
 
@@ -21,7 +21,7 @@ SWITCH_INTERVAL_S = 0.0005
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("scene", nargs="?", default="railway", help="bundled scene name or .toml path (default: railway)")
+    add_scene_options(parser, optional_scene=True)
     parser.add_argument(
         "--endpoint",
         action="append",
@@ -29,11 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="SENSOR=URI",
         help="serve SENSOR on URI (pty:PATH or tcp:HOST:PORT) instead of its scene endpoints; repeatable",
     )
-    parser.add_argument("--seed", type=int, help="override the scene's seed")
     parser.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
-    parser.add_argument(
-        "--model", metavar="PRESET", help="smoke/sensor response preset replacing the scene's (formsma2011 or physical)"
-    )
 
 
 def endpoint_overrides(items: list[str]) -> dict[str, list[str]]:
@@ -48,21 +44,20 @@ def endpoint_overrides(items: list[str]) -> dict[str, list[str]]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from emulator.scene import load_scene
-    from emulator.sensors.physical import apply_model_override
-
     if not args.speed > 0:
         raise UserError(f"--speed must be > 0, got {args.speed}")
     overrides = endpoint_overrides(args.endpoint)
-    scene = apply_model_override(load_scene(args.scene), args.model)
-    if args.seed is not None:
-        scene = dataclasses.replace(scene, seed=args.seed)
-    daemon = Daemon(scene, overrides, WallClock(args.speed))
+    daemon = Daemon(scene_from_args(args), overrides, WallClock(args.speed))
+    serve_until_signalled(daemon)
+    return 0
+
+
+def serve_until_signalled(daemon: Daemon) -> None:
+    """Run the daemon until SIGINT/SIGTERM, announcing each ready endpoint on stdout."""
     # While the scan thread computes, the loop thread must get the GIL back within
     # a fraction of a millisecond to answer commands (the default is 5 ms).
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     asyncio.run(_serve(daemon))
-    return 0
 
 
 async def _serve(daemon: Daemon) -> None:

@@ -10,6 +10,10 @@ from pathlib import Path
 
 import pytest
 
+from emulator.scene import load_scene
+from emulator.sensors import create_sensor
+from emulator.sensors.physical import apply_model_override
+
 SCENE = """
 [scene]
 name = "scan test"
@@ -121,3 +125,17 @@ def test_unknown_sensor_is_one_line_exit_2(scene_file):
 def test_missing_sensor_option_is_a_usage_error(scene_file):
     result = lrf("scan", str(scene_file))
     assert result.returncode == 2 and "--sensor" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_model_override_selects_the_preset(scene_file):
+    args = (str(scene_file), "--sensor", "urg", "--time", "1")
+    paper, physical = scan(*args), scan(*args, "--model", "physical")
+    scene = apply_model_override(load_scene(scene_file), "physical")
+    assert physical["values"] == create_sensor(scene, "urg").scan(1.0).values.tolist()
+    assert physical["values"] != paper["values"]  # datasheet noise in clear air
+
+
+def test_unknown_model_is_one_line_exit_2(scene_file):
+    result = lrf("scan", str(scene_file), "--sensor", "urg", "--model", "fog9000")
+    assert result.returncode == 2 and result.stdout == ""
+    assert result.stderr.count("\n") == 1 and "fog9000" in result.stderr and "physical" in result.stderr

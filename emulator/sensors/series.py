@@ -1,0 +1,27 @@
+"""A sensor's scans over a span of simulated time, for `record`, `plot` and the validation report."""
+
+from __future__ import annotations
+
+import math
+from typing import Iterator
+
+import numpy as np
+
+from emulator.errors import UserError
+from emulator.sensors import Sensor
+from emulator.sensors.scan import Scan
+
+
+def scan_times(period_s: float, start_s: float, end_s: float) -> np.ndarray:
+    """The scan completion times k · period_s within [start_s, end_s]."""
+    if not (math.isfinite(start_s) and math.isfinite(end_s)) or start_s < 0 or end_s < start_s:
+        raise UserError(f"need 0 <= --start <= --end, got {start_s} and {end_s}")
+    first = math.ceil(start_s / period_s - 1e-9)
+    last = math.floor(end_s / period_s + 1e-9)
+    return np.arange(first, last + 1) * period_s
+
+
+def scan_series(sensor: Sensor, times_s: np.ndarray) -> Iterator[Scan]:
+    """The sensor's configured scans at `times_s`, as the device would put them on the wire."""
+    for time_s in times_s:
+        yield sensor.configured_scan(float(time_s))
