@@ -195,8 +195,7 @@ def cross_beams(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_
     puffs = _near_segments(puffs, origins, directions, beam_end_m)
     fan = _fan_pairs(puffs, origins, directions)
     if fan is not None:  # a fan has one origin: each puff's offset and distance once, not once per pair
-        beam, puff = fan
-        puff_offset = puffs.centers - origins[0]
+        beam, puff, puff_offset = fan
         offset, distance_sq = puff_offset[puff], np.einsum("ij,ij->i", puff_offset, puff_offset)[puff]
     else:
         beam, puff = _all_pairs(len(origins), len(puffs))
@@ -225,12 +224,14 @@ def _all_pairs(n_beams: int, n_puffs: int) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True)
 class _Fan:
-    """A fan's plane (`first`, `second` in it, `normal`) and its beams' angles in it, ascending."""
+    """A fan's plane (`first`, `second` in it, `normal`) and its beams' angles in it, ascending;
+    `axes` (3, 3) holds (normal, first, second) as columns, to project offsets in one pass."""
 
     first: np.ndarray
     second: np.ndarray
     normal: np.ndarray
     beam_angle: np.ndarray
+    axes: np.ndarray
 
 
 _FANS = KeptPerArrays()
@@ -257,20 +258,23 @@ def _fan_geometry(origins: np.ndarray, directions: np.ndarray) -> _Fan | None:
         second, beam_angle = -second, -beam_angle
     if np.any(np.diff(beam_angle) <= 0):
         return None
-    for array in (first, second, normal, beam_angle):
+    axes = np.stack([normal, first, second], axis=1)
+    for array in (first, second, normal, beam_angle, axes):
         array.flags.writeable = False  # kept and shared by later scans
-    return _Fan(first, second, normal, beam_angle)
+    return _Fan(first, second, normal, beam_angle, axes)
 
 
-def _fan_pairs(puffs: Puffs, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Candidate (beam, puff) pairs of a fan of beams, or None if the beams are no fan."""
+def _fan_pairs(puffs: Puffs, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Candidate (beam, puff) pairs of a fan of beams and each puff's offset from its origin,
+    or None if the beams are no fan."""
     fan = _fan_of(origins, directions)
     if fan is None:
         return None
-    first, second, normal, beam_angle = fan.first, fan.second, fan.normal, fan.beam_angle
+    beam_angle, axes = fan.beam_angle, fan.axes
     offset = puffs.centers - origins[0]
-    height = _dot(offset, normal)
-    x, y = _dot(offset, first), _dot(offset, second)
+    # each column as _dot computes it: o0·a0 + o1·a1 + o2·a2
+    projected = offset[:, :1] * axes[0] + offset[:, 1:2] * axes[1] + offset[:, 2:] * axes[2]
+    height, x, y = projected[:, 0], projected[:, 1], projected[:, 2]
     reach = REACH_SIGMAS * puffs.sigma
     in_plane = np.sqrt(np.maximum(reach * reach - height * height, 0.0))
     distance = np.hypot(x, y)
@@ -279,7 +283,7 @@ def _fan_pairs(puffs: Puffs, origins: np.ndarray, directions: np.ndarray) -> tup
         half_width = np.where(around_origin, np.pi, np.arcsin(np.minimum(np.maximum(in_plane / distance, 0.0), 1.0)))
     centre = np.arctan2(y, x)
     beams, puff_of = [], []
-    wraps = bool(np.any(centre - half_width <= -np.pi) or np.any(centre + half_width >= np.pi))
+    wraps = bool(np.max(np.abs(centre) + half_width, initial=-np.inf) >= np.pi)  # fl(c - w) = -fl(-c + w): the same test
     for turn in (-2.0 * np.pi, 0.0, 2.0 * np.pi) if wraps else (0.0,):  # an interval may wrap around ±pi
         low = np.searchsorted(beam_angle, centre + turn - half_width, side="left")
         high = np.searchsorted(beam_angle, centre + turn + half_width, side="right")
@@ -291,7 +295,7 @@ def _fan_pairs(puffs: Puffs, origins: np.ndarray, directions: np.ndarray) -> tup
         counts = high - low
         puff_of.append(np.repeat(np.arange(len(puffs)), counts))
         beams.append(np.repeat(low - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts) + np.arange(counts.sum()))
-    return np.concatenate(beams), np.concatenate(puff_of)
+    return np.concatenate(beams), np.concatenate(puff_of), offset
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
