@@ -21,7 +21,7 @@ from emulator.optics.kept import KeptPerArrays
 from emulator.optics.puffs import BeamPuffCrossings, Puffs, cross_beams
 from emulator.scene.material_optics import optics_for, patch_values
 from emulator.sensors.beam_geometry import scan_plane_rays
-from emulator.sensors.physical_echo import log_target_echo, smoke_bin_echo
+from emulator.sensors.physical_echo import echoing, log_clear_air_echo, smoke_bin_echo
 from emulator.sensors.physical_noise import fluctuation_factor
 from emulator.sensors.physical_params import PhysicalParams, ReceiverOptics
 from emulator.sensors.response import Beams
@@ -124,8 +124,6 @@ class _SurfaceGeometry:
     """
 
     ranges: np.ndarray
-    reflectivity: np.ndarray
-    cos_factor: np.ndarray
     stretch: np.ndarray
     used: np.ndarray
     edge_rows: np.ndarray
@@ -133,6 +131,8 @@ class _SurfaceGeometry:
     limits: np.ndarray  # range of each present surface, 0 elsewhere (an unused sub-ray's limit 0 adds exactly 0)
     any_present: np.ndarray  # (N,)
     end_and_surface_m: np.ndarray  # (N, 2): each beam's end and its central sub-ray's limit
+    log_clear_air: np.ndarray  # ln of each sub-ray's echo without smoke
+    echoing: np.ndarray  # present sub-rays that can return an echo at all
 
 
 _GEOMETRIES = KeptPerArrays()
@@ -176,8 +176,18 @@ def _footprint_surfaces(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, 
         reflectivity[patchy] *= np.exp(patchiness[patchy] * patch_values(points, beams.scene.seed))
     limits = np.where(present, ranges, 0.0)
     end_and_surface = np.stack([hits.beam_end_m, limits[:, 0]], axis=1)
+    cos_factor = cosine**angle_exponent
     geometry = _SurfaceGeometry(
-        ranges, reflectivity, cosine**angle_exponent, stretch, used, edge_rows, present, limits, present.any(axis=1), end_and_surface
+        ranges,
+        stretch,
+        used,
+        edge_rows,
+        present,
+        limits,
+        present.any(axis=1),
+        end_and_surface,
+        log_clear_air_echo(reflectivity, cos_factor, ranges, receiver, params),
+        present & echoing(reflectivity, cos_factor, ranges),
     )
     for field in dataclasses.fields(geometry):
         getattr(geometry, field.name).flags.writeable = False
@@ -196,9 +206,7 @@ def _surfaces(
 ) -> Surfaces:
     """`geometry`'s surfaces seen through this scan's smoke; `puff_to_surface` is the puffs'
     optical path to each beam's central sub-ray (N,)."""
-    ranges, reflectivity, cos_factor, stretch, used, present, limits = (
-        geometry.ranges, geometry.reflectivity, geometry.cos_factor, geometry.stretch, geometry.used, geometry.present, geometry.limits
-    )
+    ranges, stretch, used, present, limits = geometry.ranges, geometry.stretch, geometry.used, geometry.present, geometry.limits
     region_path = np.zeros(ranges.shape)
     region_path[:, 0] = hits.region_optical_path
     edge_rows = geometry.edge_rows
@@ -210,8 +218,7 @@ def _surfaces(
         puff_path[edge_rows, 1:] = crossings.optical_path_to(limits[edge_rows, 1:], edge_rows)
     optical_path = factor[:, None] * (region_path + puff_path)
     extinction = beams.scene.density_to_extinction
-    log_each = log_target_echo(reflectivity, cos_factor, ranges, optical_path, extinction, receiver, params)
-    log_each = np.where(present, log_each, -np.inf)
+    log_each = np.where(geometry.echoing, geometry.log_clear_air - 2.0 * extinction * optical_path, -np.inf)
     shares = used.sum(axis=1, keepdims=True)
     amp = np.exp(log_each) / shares
     single = shares[:, 0] == 1

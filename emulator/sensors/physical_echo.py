@@ -65,14 +65,21 @@ def log_target_echo(
     params: PhysicalParams,
 ) -> np.ndarray:
     """ln a per surface hit (-inf where there is no surface)."""
+    clear_air = log_clear_air_echo(reflectivity, cos_factor, range_m, receiver, params)
+    return np.where(echoing(reflectivity, cos_factor, range_m), clear_air - 2.0 * extinction_per_density * optical_path, -np.inf)
+
+
+def log_clear_air_echo(
+    reflectivity: np.ndarray, cos_factor: np.ndarray, range_m: np.ndarray, receiver: ReceiverOptics, params: PhysicalParams
+) -> np.ndarray:
+    """ln a of each surface hit without smoke (meaningful where `echoing`): fixed for a fixed surface."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        log_echo = (
-            np.log(reflectivity / params.reference_reflectivity)
-            + np.log(cos_factor)
-            + np.log(range_law(range_m, receiver, params))
-            - 2.0 * extinction_per_density * optical_path
-        )
-    return np.where(np.isfinite(range_m) & (reflectivity > 0) & (cos_factor > 0), log_echo, -np.inf)
+        return np.log(reflectivity / params.reference_reflectivity) + np.log(cos_factor) + np.log(range_law(range_m, receiver, params))
+
+
+def echoing(reflectivity: np.ndarray, cos_factor: np.ndarray, range_m: np.ndarray) -> np.ndarray:
+    """Surface hits that can return an echo at all."""
+    return np.isfinite(range_m) & (reflectivity > 0) & (cos_factor > 0)
 
 
 def smoke_bin_echo(
