@@ -124,7 +124,8 @@ class _SurfaceGeometry:
     """
 
     ranges: np.ndarray
-    stretch: np.ndarray
+    stretch_per_path: np.ndarray  # material range stretch × 2 k: apparent range = range × (1 + this × optical path)
+    shares: np.ndarray  # (N, 1): sub-rays used per beam, which share its echo power
     used: np.ndarray
     edge_rows: np.ndarray
     present: np.ndarray  # used, with a surface in reach
@@ -143,7 +144,7 @@ def _surface_geometry(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, pa
     reused by every scan), since objects never move."""
     return _GEOMETRIES.get(
         (hits.solid_range_m, beams.angles_rad, hits.beam_end_m),
-        (receiver, params, beams.scene.seed),
+        (receiver, params, beams.scene.seed, beams.scene.density_to_extinction),
         lambda: _footprint_surfaces(hits, beams, receiver, params),
     )
 
@@ -179,7 +180,8 @@ def _footprint_surfaces(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, 
     cos_factor = cosine**angle_exponent
     geometry = _SurfaceGeometry(
         ranges,
-        stretch,
+        stretch * 2.0 * beams.scene.density_to_extinction,
+        used.sum(axis=1, keepdims=True),
         used,
         edge_rows,
         present,
@@ -206,7 +208,7 @@ def _surfaces(
 ) -> Surfaces:
     """`geometry`'s surfaces seen through this scan's smoke; `puff_to_surface` is the puffs'
     optical path to each beam's central sub-ray (N,)."""
-    ranges, stretch, used, present, limits = geometry.ranges, geometry.stretch, geometry.used, geometry.present, geometry.limits
+    ranges, present, limits = geometry.ranges, geometry.present, geometry.limits
     region_path = np.zeros(ranges.shape)
     region_path[:, 0] = hits.region_optical_path
     edge_rows = geometry.edge_rows
@@ -219,12 +221,12 @@ def _surfaces(
     optical_path = factor[:, None] * (region_path + puff_path)
     extinction = beams.scene.density_to_extinction
     log_each = np.where(geometry.echoing, geometry.log_clear_air - 2.0 * extinction * optical_path, -np.inf)
-    shares = used.sum(axis=1, keepdims=True)
+    shares = geometry.shares
     amp = np.exp(log_each) / shares
     single = shares[:, 0] == 1
     with np.errstate(divide="ignore"):
         log_echo = np.where(single, log_each[:, 0], np.log(amp.sum(axis=1)))
-    apparent = ranges * (1.0 + stretch * 2.0 * extinction * optical_path)
+    apparent = ranges * (1.0 + geometry.stretch_per_path * optical_path)
     return Surfaces(log_echo, amp, np.where(present, apparent, np.inf), present)
 
 
