@@ -87,14 +87,6 @@ def lms_values(hits: BeamHits, beams: Beams, unit: str, params: PhysicalParams =
 def _lms_echo(
     target_amp: np.ndarray, target_range_m: np.ndarray, smoke: SmokeEchoes, threshold: float, params: PhysicalParams
 ) -> tuple[np.ndarray, np.ndarray]:
-    """First echo of every beam in one pass: a beam without smoke gets an all-zero range grid
-    (what a grid of its own would hold: no smoke energy anywhere)."""
-    n, smoky = len(target_amp), len(smoke.rows)
-    clear = np.ones(n, dtype=bool)
-    clear[smoke.rows] = False
-    rows = np.concatenate([smoke.rows, np.flatnonzero(clear)])
-    amp, edges = np.zeros((n, smoke.amp.shape[1])), np.zeros((n, smoke.edges_m.shape[1]))
-    amp[:smoky], edges[:smoky] = smoke.amp, smoke.edges_m
-    echo_m, clean = np.empty(n), np.empty(n, dtype=bool)
-    echo_m[rows], _, clean[rows] = lms_first_echo(target_amp[rows], target_range_m[rows], amp, edges, threshold, params.lms)
+    """First echo of every beam; only the beams `smoke.rows` have a range grid."""
+    echo_m, _, clean = lms_first_echo(target_amp, target_range_m, smoke.amp, smoke.edges_m, threshold, params.lms, smoke.rows)
     return echo_m, clean

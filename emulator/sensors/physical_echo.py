@@ -198,33 +198,37 @@ def lms_first_echo(
     edges_m: np.ndarray,
     log_threshold_value: float,
     receiver: LmsReceiver,
+    smoke_rows: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The pulsed receiver: (range_m, from_smoke, clean) per beam; range inf = no echo.
 
     The receiver integrates the echo energy over the last `window_m` of range
     (smoke bins, and the surfaces met so far) and stops at the first distance
     where it reaches the threshold. The echo is clean when `sharp_fraction`
-    of the threshold arrived within the last `max_rise_m`.
+    of the threshold arrived within the last `max_rise_m`. `smoke_amp` and
+    `edges_m` hold the beams `smoke_rows` (default: all); the others have no smoke.
     """
     threshold = float(np.exp(log_threshold_value))
+    smoke_rows = np.arange(len(target_amp)) if smoke_rows is None else smoke_rows
     cumulative = np.concatenate([np.zeros((len(smoke_amp), 1)), np.cumsum(smoke_amp, axis=1)], axis=1)
 
     span = cumulative.max(axis=1) - cumulative.min(axis=1)  # cumulative starts at 0: span 0 means no smoke energy
-    smoky = np.flatnonzero(span > 0)  # every other row's windows hold exactly 0
-    # a window holds at most the span (to within a few ulps): only these rows can trigger on smoke
+    holding = np.flatnonzero(span > 0)  # every other beam's windows hold exactly 0
+    # a window holds at most the span (to within a few ulps): only these can trigger on smoke
     reachable = np.flatnonzero(span >= threshold * (1.0 - 1e-9))
     fractions = _edge_fractions(edges_m)
 
     def rows_window(rows: np.ndarray, points_m: np.ndarray) -> np.ndarray:
-        """Smoke energy within the window ending at each point (R, K) of `rows`: one interpolation for both ends."""
+        """Smoke energy within the window ending at each point (R, K) of smoke `rows`: one interpolation for both ends."""
         at = _cumulative_at(cumulative[rows], edges_m[rows], fractions, np.concatenate([points_m, points_m - receiver.window_m], axis=1))
         return at[:, : points_m.shape[1]] - at[:, points_m.shape[1] :]
 
     def smoke_window(points_m: np.ndarray) -> np.ndarray:
-        """The same for every row's points (N, K)."""
+        """The same for every beam's points (N, K)."""
         windows = np.zeros(points_m.shape)
-        if len(smoky):
-            windows[smoky] = rows_window(smoky, points_m[smoky])
+        if len(holding):
+            beams = smoke_rows[holding]
+            windows[beams] = rows_window(holding, points_m[beams])
         return windows
 
     order = np.argsort(np.where(target_amp > 0, target_range_m, np.inf), axis=1)
@@ -232,7 +236,7 @@ def lms_first_echo(
     ranges, amps = target_range_m.ravel()[order], target_amp.ravel()[order]
     smoke_at = np.full(len(ranges), np.inf)
     if len(reachable):
-        smoke_at[reachable] = _crossing_on_grid(rows_window(reachable, edges_m[reachable]), edges_m[reachable], threshold)
+        smoke_at[smoke_rows[reachable]] = _crossing_on_grid(rows_window(reachable, edges_m[reachable]), edges_m[reachable], threshold)
     energy_at_target = smoke_window(ranges) + np.cumsum(amps, axis=1)
     reached = (energy_at_target >= threshold) & (amps > 0)
     rows = np.arange(len(ranges))
