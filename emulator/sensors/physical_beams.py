@@ -73,7 +73,7 @@ def beam_physics(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, params:
     column = hits.region_optical_path + puff_to_end_and_surface[:, 0]
     smoke_start, smoke_end = _smoke_extent(hits, crossings, beam_end)
     with np.errstate(invalid="ignore"):
-        smoke_distance = np.where(np.isfinite(smoke_start), 0.5 * (smoke_start + np.minimum(smoke_end, beam_end)), 1.0)
+        smoke_distance = np.where(np.isfinite(smoke_start), 0.5 * (smoke_start + smoke_end), 1.0)
     factor = fluctuation_factor(scene.seed, beams.sensor.name, beams.angles_rad, beams.time_s, column, smoke_distance, params)
     surfaces = _surfaces(hits, beams, geometry, crossings, puff_to_end_and_surface[:, 1], factor, receiver, params)
     far_end = np.where(geometry.any_present, np.where(surfaces.present, surfaces.range_m, 0.0).max(axis=1), beam_end)

@@ -40,7 +40,8 @@ def fluctuation_field(seed: int, sensor: str, angles_rad: np.ndarray, time_s: fl
     wavenumber, frequency, phase = _fluctuation_modes(
         seed, sensor, params.fluctuation_modes, params.fluctuation_angle_deg, params.fluctuation_time_s
     )
-    argument = np.outer(angles_rad, wavenumber) + frequency * time_s + phase
+    along_angle = _FIELD_ANGLES.get((angles_rad, wavenumber), None, lambda: _read_only(np.outer(angles_rad, wavenumber)))
+    argument = along_angle + frequency * time_s + phase
     return np.sqrt(2.0 / params.fluctuation_modes) * np.cos(argument).sum(axis=1)
 
 
@@ -66,13 +67,28 @@ def edge_strength(column: np.ndarray, angles_rad: np.ndarray, smoke_distance_m: 
     if len(column) < 3:
         return np.zeros(len(column))
     padded = np.concatenate([column[:1], column, column[-1:]])
-    angles = np.concatenate([angles_rad[:1] - (angles_rad[1] - angles_rad[0]), angles_rad, angles_rad[-1:] + (angles_rad[-1] - angles_rad[-2])])
-    spacing = np.abs(angles[2:] - angles[:-2]) * np.maximum(smoke_distance_m, 0.1)
+    spacing = _BEAM_SPACINGS.get((angles_rad,), None, lambda: _beam_spacing_rad(angles_rad)) * np.maximum(smoke_distance_m, 0.1)
     with np.errstate(divide="ignore", invalid="ignore"):
         relative = np.abs(padded[2:] - padded[:-2]) / (spacing * column)
     strength = relative * length_m
     strength[np.isnan(strength)] = 0.0  # no smoke on either side
     return np.minimum(np.maximum(strength, 0.0), 1.0)  # +inf (smoke only on one side) → 1
+
+
+_BEAM_SPACINGS = KeptPerArrays()
+_FIELD_ANGLES = KeptPerArrays()
+
+
+def _beam_spacing_rad(angles_rad: np.ndarray) -> np.ndarray:
+    """Angle between each beam's two neighbours (the ends extrapolated); kept for a sensor's read-only angles."""
+    angles = np.concatenate([angles_rad[:1] - (angles_rad[1] - angles_rad[0]), angles_rad, angles_rad[-1:] + (angles_rad[-1] - angles_rad[-2])])
+    return _read_only(np.abs(angles[2:] - angles[:-2]))
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    """`array`, locked: kept values are shared by every later scan."""
+    array.flags.writeable = False
+    return array
 
 
 def fluctuation_factor(
