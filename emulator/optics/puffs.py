@@ -162,8 +162,7 @@ class BeamPuffCrossings:
         result += np.cumsum(steps.reshape(count, width + 1)[:, :width], axis=1)
         inside = past - first
         pair = np.repeat(np.arange(len(beam)), inside)
-        grid = np.repeat(first - (np.cumsum(inside) - inside), inside) + np.arange(len(pair))
-        point = beam[pair] * width + grid  # row-major in (count, width)
+        point = np.repeat(beam * width + first - (np.cumsum(inside) - inside), inside) + np.arange(len(pair))  # row-major (count, width)
         standard = (start_m[:, None] + length_m[:, None] * fractions).ravel()[point]  # the grid once, not per pair
         standard -= along[pair]
         standard /= sigma[pair]
