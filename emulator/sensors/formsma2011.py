@@ -7,10 +7,14 @@ which meets a plume particle before the solid, returns error 1 (low reflected
 intensity); else with nothing solid within 5.6 m it returns 0; otherwise the range
 in mm (a range that rounds below 20 mm returns 19, non-measurable distance).
 
-The paper's own implementation (§4.3) returns error value 0 when the
-penetration power is used up; SMOKE_MODEL.md §2 asks for 1, which keeps smoke
-apart from 0 ("nothing within range"). Both are valid URG error codes; this
-follows SMOKE_MODEL.md (`urg04lx.LOW_INTENSITY`).
+The paper's text (§4.3) returns "error value zero" when the penetration
+power is used up; SMOKE_MODEL.md §2 asks for 1. We keep 1 on purpose: 0 is
+the URG's code for "nothing within range", which outdoors is most beams, so
+with 0 a smoke-blanked beam could not be told from open sky by any consumer
+(drivers, plots, the validation report); 1 is the device's own code for this
+cause (low reflected intensity) and lies within the "error values between 0
+and 20" the paper observed on the real unit (§3.3). Drivers treat both as
+invalid readings.
 
 LMS200: smoke regions are transparent; a plume particle met before the solid
 is seen as a solid (its entry range is reported). A range beyond the unit's
