@@ -2,8 +2,8 @@
 
 Reads go to the session; outputs go through an `Outbox`, written in order
 without ever blocking the loop: paced writes wake on a timer, a full kernel
-buffer wakes on writability. Both transports use this; they differ only in
-how a client arrives and leaves.
+buffer wakes on writability. Both transports use this, through `ClientSlot`;
+they differ only in how a client arrives and leaves.
 """
 
 from __future__ import annotations
@@ -131,3 +131,59 @@ class Link:
                 self._loop.add_writer(self._fd, self._on_writable)
                 self._waiting_writable = True
                 return
+
+
+class ClientSlot:
+    """An endpoint's one client at a time: the `Link` that ties it to the session.
+
+    The pty and TCP endpoints derive from this so that a client is wired to the
+    session, counted, fed and dropped the same way on both.
+    """
+
+    def __init__(self, session: Session, *, limit_bytes: int = DEFAULT_LIMIT_BYTES) -> None:
+        self.clients_served = 0
+        self._session = session
+        self._limit_bytes = limit_bytes
+        self._link: Link | None = None
+
+    @property
+    def connected(self) -> bool:
+        return self._link is not None
+
+    @property
+    def link(self) -> Link | None:
+        return self._link
+
+    def send(self, outputs: list[Output]) -> None:
+        """Queue outputs for the client; with no client they are discarded."""
+        if self._link is not None:
+            self._link.send(outputs)
+
+    def _connect(
+        self,
+        loop: asyncio.AbstractEventLoop,
+        fd: int,
+        *,
+        read: Callable[[], bytes],
+        write: Callable[[bytes], int],
+        on_lost: Callable[[], None],
+        accepts_input: Callable[[], bool] = lambda: True,
+    ) -> None:
+        """A client arrived on `fd`: link it to the session."""
+        self.clients_served += 1
+        self._link = Link(
+            loop,
+            fd,
+            read=read,
+            write=write,
+            session=self._session,
+            on_lost=on_lost,
+            accepts_input=accepts_input,
+            limit_bytes=self._limit_bytes,
+        )
+
+    def _disconnect(self) -> None:
+        """Forget the client; unsent output is discarded (the session is not told)."""
+        if self._link is not None:
+            self._link.close()
+            self._link = None

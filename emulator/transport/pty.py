@@ -20,9 +20,8 @@ from pathlib import Path
 
 from emulator.errors import UserError
 from emulator.transport import PtyAddress, Session
-from emulator.transport.link import READ_SIZE, Link
+from emulator.transport.link import READ_SIZE, ClientSlot
 from emulator.transport.outbox import DEFAULT_LIMIT_BYTES
-from protocols.device import Output
 
 PRESENCE_POLL_S = 0.015
 
@@ -32,7 +31,7 @@ BAUD_OF_SPEED: dict[int, int] = {
 }
 
 
-class PtyEndpoint:
+class PtyEndpoint(ClientSlot):
     """Serves one session on a pty published at `address.path`.
 
     Received bytes are discarded while the client's termios speed differs from
@@ -48,25 +47,14 @@ class PtyEndpoint:
         *,
         limit_bytes: int = DEFAULT_LIMIT_BYTES,
     ) -> None:
+        super().__init__(session, limit_bytes=limit_bytes)
         self.address = address
         self.link_path = Path(address.path).absolute()
         self.slave_name = ""
-        self.clients_served = 0
-        self._session = session
-        self._limit_bytes = limit_bytes
         self._master = -1
         self._hangup_poller = select.poll()
-        self._link: Link | None = None
         self._presence_timer: asyncio.TimerHandle | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
-
-    @property
-    def connected(self) -> bool:
-        return self._link is not None
-
-    @property
-    def link(self) -> Link | None:
-        return self._link
 
     def open(self, loop: asyncio.AbstractEventLoop) -> str:
         """Create the pty and its symlink; returns the slave's name (/dev/pts/N)."""
@@ -89,19 +77,12 @@ class PtyEndpoint:
         self._watch_for_client()
         return self.slave_name
 
-    def send(self, outputs: list[Output]) -> None:
-        """Queue outputs for the client; with no client they are discarded."""
-        if self._link is not None:
-            self._link.send(outputs)
-
     def close(self) -> None:
         """Close the pty and remove the symlink (only if it is still ours)."""
         if self._presence_timer is not None:
             self._presence_timer.cancel()
             self._presence_timer = None
-        if self._link is not None:
-            self._link.close()
-            self._link = None
+        self._disconnect()
         if self._master >= 0:
             self._hangup_poller.unregister(self._master)
             os.close(self._master)
@@ -129,16 +110,13 @@ class PtyEndpoint:
         if self._master < 0:
             return
         if self._client_present():
-            self.clients_served += 1
-            self._link = Link(
+            self._connect(
                 self._loop,
                 self._master,
                 read=lambda: os.read(self._master, READ_SIZE),
                 write=lambda data: os.write(self._master, data),
-                session=self._session,
                 on_lost=self._client_left,
                 accepts_input=self._baud_matches,
-                limit_bytes=self._limit_bytes,
             )
         else:
             self._presence_timer = self._loop.call_later(PRESENCE_POLL_S, self._watch_for_client)
@@ -148,7 +126,7 @@ class PtyEndpoint:
         return baud is None or self.client_baud() == baud
 
     def _client_left(self) -> None:
-        self._link = None
+        self._disconnect()
         self._discard_queued_bytes()
         self._session.disconnected()
         self._watch_for_client()

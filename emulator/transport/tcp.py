@@ -14,9 +14,8 @@ import socket
 
 from emulator.errors import UserError
 from emulator.transport import Session, TcpAddress
-from emulator.transport.link import READ_SIZE, Link
+from emulator.transport.link import READ_SIZE, ClientSlot
 from emulator.transport.outbox import DEFAULT_LIMIT_BYTES
-from protocols.device import Output
 
 # The kernel's send buffer would otherwise autotune to megabytes of stale scans
 # ahead of a slow client; keep it near a device's own buffering so the outbox
@@ -24,7 +23,7 @@ from protocols.device import Output
 SEND_BUFFER_BYTES = 16 * 1024
 
 
-class TcpEndpoint:
+class TcpEndpoint(ClientSlot):
     """Serves one session on a listening TCP socket."""
 
     def __init__(
@@ -34,24 +33,13 @@ class TcpEndpoint:
         *,
         limit_bytes: int = DEFAULT_LIMIT_BYTES,
     ) -> None:
+        super().__init__(session, limit_bytes=limit_bytes)
         self.address = address
         self.bound: TcpAddress | None = None
-        self.clients_served = 0
         self.refused = 0
-        self._session = session
-        self._limit_bytes = limit_bytes
         self._listener: socket.socket | None = None
         self._client: socket.socket | None = None
-        self._link: Link | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
-
-    @property
-    def connected(self) -> bool:
-        return self._link is not None
-
-    @property
-    def link(self) -> Link | None:
-        return self._link
 
     def open(self, loop: asyncio.AbstractEventLoop) -> TcpAddress:
         """Bind and listen; returns the bound address (the real port when 0 was asked)."""
@@ -76,11 +64,6 @@ class TcpEndpoint:
         loop.add_reader(listener.fileno(), self._accept)
         return self.bound
 
-    def send(self, outputs: list[Output]) -> None:
-        """Queue outputs for the client; with no client they are discarded."""
-        if self._link is not None:
-            self._link.send(outputs)
-
     def close(self) -> None:
         self._drop_client()
         if self._listener is not None:
@@ -93,7 +76,7 @@ class TcpEndpoint:
             client, _ = self._listener.accept()
         except (BlockingIOError, InterruptedError, ConnectionAbortedError):
             return
-        if self._link is not None and self._client_still_there():
+        if self.connected and self._client_still_there():
             self.refused += 1
             client.close()
             return
@@ -101,16 +84,13 @@ class TcpEndpoint:
         client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         client.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
         client.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER_BYTES)
-        self.clients_served += 1
         self._client = client
-        self._link = Link(
+        self._connect(
             self._loop,
             client.fileno(),
             read=lambda: client.recv(READ_SIZE),
             write=client.send,
-            session=self._session,
             on_lost=self._client_left,
-            limit_bytes=self._limit_bytes,
         )
 
     def _client_still_there(self) -> bool:
@@ -131,9 +111,7 @@ class TcpEndpoint:
         self._session.disconnected()
 
     def _drop_client(self) -> None:
-        if self._link is not None:
-            self._link.close()
-            self._link = None
+        self._disconnect()
         if self._client is not None:
             self._client.close()
             self._client = None
