@@ -88,5 +88,5 @@ def _lms_echo(
     target_amp: np.ndarray, target_range_m: np.ndarray, smoke: SmokeEchoes, threshold: float, params: PhysicalParams
 ) -> tuple[np.ndarray, np.ndarray]:
     """First echo of every beam; only the beams `smoke.rows` have a range grid."""
-    echo_m, _, clean = lms_first_echo(target_amp, target_range_m, smoke.amp, smoke.edges_m, threshold, params.lms, smoke.rows)
+    echo_m, _, clean = lms_first_echo(target_amp, target_range_m, smoke.amp, smoke.edges_m, threshold, params.lms, smoke.rows, smoke.fractions)
     return echo_m, clean

@@ -45,12 +45,14 @@ class Surfaces:
 @dataclass(frozen=True)
 class SmokeEchoes:
     """Smoke backscatter per range bin for the R beams `rows` that meet smoke:
-    power (R, M), bin centres (R, M), bin edges (R, M+1)."""
+    power (R, M), bin centres (R, M), bin edges (R, M+1), which lie at the same
+    `fractions` (M+1,) of each beam's smoke extent."""
 
     rows: np.ndarray
     amp: np.ndarray
     mid_m: np.ndarray
     edges_m: np.ndarray
+    fractions: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -304,4 +306,4 @@ def _smoke_echoes(
     share = receiver.volume_gain * params.backscatter_ratio * multiple_scattering
     transmission = np.exp(-2.0 * extinction * path)
     mid = 0.5 * (edges[:, 1:] + edges[:, :-1])
-    return SmokeEchoes(rows, smoke_bin_echo(transmission, share, mid, receiver, params), mid, edges)
+    return SmokeEchoes(rows, smoke_bin_echo(transmission, share, mid, receiver, params), mid, edges, fractions)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from emulator.optics.kept import KeptPerArrays
 from emulator.sensors.physical_params import SPEED_OF_LIGHT_M_S, LmsReceiver, PhysicalParams, ReceiverOptics, UrgReceiver
 
 
@@ -148,47 +149,86 @@ def urg_decision(
     return detected, coherent, mean_range
 
 
-def _crossing_on_grid(cumulative: np.ndarray, edges_m: np.ndarray, level: float) -> np.ndarray:
-    """First distance where a cumulative energy (N, M+1) at bin edges reaches `level` (inf if never)."""
-    reached = cumulative >= level
+def _crossing_on_grid(energy: np.ndarray, edges_m: np.ndarray, level: float) -> np.ndarray:
+    """First distance where an energy (N, M+1) given at bin edges, linear in between, reaches `level` (inf if never)."""
+    reached = energy >= level
     index = np.argmax(reached, axis=1)
-    any_reached = reached.any(axis=1)
-    rows = np.arange(len(cumulative))
+    rows = np.arange(len(energy))
+    any_reached = reached[rows, index]  # argmax finds the first True, or 0 when there is none
     previous = np.maximum(index - 1, 0)
-    low, high = cumulative[rows, previous], cumulative[rows, index]
+    low, high = energy[rows, previous], energy[rows, index]
     with np.errstate(divide="ignore", invalid="ignore"):
-        fraction = np.where(high > low, (level - low) / (high - low), 1.0)
-    at = edges_m[rows, previous] + np.minimum(np.maximum(fraction, 0.0), 1.0) * (edges_m[rows, index] - edges_m[rows, previous])
-    return np.where(any_reached, np.where(index == 0, edges_m[:, 0], at), np.inf)
+        fraction = np.fmin(np.fmax((level - low) / (high - low), 0.0), 1.0)  # fmax: NaN (high == low, only at index 0) → 0
+    at = edges_m[rows, previous] + fraction * (edges_m[rows, index] - edges_m[rows, previous])
+    return np.where(any_reached, at, np.inf)
 
 
-def _edge_fractions(edges_m: np.ndarray) -> np.ndarray:
-    """The bin edges as fractions of a beam's extent, read off the widest beam.
+@dataclass(frozen=True)
+class _EdgeLookup:
+    """Finds the bin of a fraction of a beam's extent with two table look-ups instead of a binary search.
 
-    Every row's bin edges are the same fractions of its own extent (only the
-    start and length differ), so one binary search on those fractions serves all rows.
+    `cell_bin` gives the bin at the start of each of `cells` equal cells, each narrower than any bin,
+    so a point's bin is that or the next one; `next_edge` and `inverse_width` are indexed by bin.
     """
+
+    fractions: np.ndarray
+    cells: int
+    cell_bin: np.ndarray
+    next_edge: np.ndarray
+    inverse_width: np.ndarray
+
+    @staticmethod
+    def of(fractions: np.ndarray) -> _EdgeLookup:
+        bins = len(fractions) - 1
+        widths = np.diff(fractions)
+        cells = int(np.ceil(2.0 / widths.min())) + 1
+        cell_bin = np.minimum(np.searchsorted(fractions, np.arange(cells) / cells, side="right") - 1, bins - 1)
+        next_edge = np.append(fractions[1:bins], np.inf)  # the last bin takes everything up to 1
+        return _EdgeLookup(fractions, cells, cell_bin, next_edge, 1.0 / widths)
+
+    def interpolate(self, values: np.ndarray, rows: np.ndarray, along: np.ndarray) -> np.ndarray:
+        """`values` (N, M+1) at bin edges, linear within each bin, for `rows` (R,) at fractions `along` (R, K) in [0, 1]."""
+        index = self.cell_bin.take((along * (self.cells * (1.0 - 1e-12))).astype(np.intp))
+        index += along >= self.next_edge.take(index)
+        fraction = along - self.fractions.take(index)
+        fraction *= self.inverse_width.take(index)
+        index += (rows * values.shape[1])[:, None]  # row-major flat positions
+        flat = values.ravel()
+        low = flat.take(index)
+        high = flat.take(index + 1)
+        high -= low
+        high *= fraction
+        high += low
+        return high
+
+
+_LOOKUPS = KeptPerArrays()
+
+
+def _edge_lookup(edges_m: np.ndarray, fractions: np.ndarray | None) -> _EdgeLookup:
+    """The look-up for `fractions` (kept when they are a read-only array), or for the fractions
+    that every row's edges share, read off the widest row."""
+    if fractions is not None:
+        return _LOOKUPS.get((fractions,), None, lambda: _EdgeLookup.of(fractions))
     length = edges_m[:, -1] - edges_m[:, 0]
     widest = int(np.argmax(length)) if len(length) else 0
     if len(length) and length[widest] > 0:
-        return (edges_m[widest] - edges_m[widest, :1]) / length[widest : widest + 1]
-    return np.linspace(0.0, 1.0, edges_m.shape[1])
+        return _EdgeLookup.of((edges_m[widest] - edges_m[widest, 0]) / length[widest])
+    return _EdgeLookup.of(np.linspace(0.0, 1.0, edges_m.shape[1]))
 
 
-def _cumulative_at(cumulative: np.ndarray, edges_m: np.ndarray, fractions: np.ndarray, points_m: np.ndarray) -> np.ndarray:
-    """Cumulative smoke energy at `points_m` (N, S), linear within each bin (edges at `fractions` of each extent)."""
-    start, stop = edges_m[:, :1], edges_m[:, -1:]
-    length = stop - start
-    bins = cumulative.shape[1] - 1
-    along = (np.where(np.isfinite(points_m), points_m, stop) - start) / np.where(length > 0, length, 1.0)
-    along = np.minimum(np.maximum(along, 0.0), 1.0)
-    index = np.searchsorted(fractions, along, side="right") - 1
-    index = np.minimum(np.maximum(index, 0), bins - 1)
-    fraction = (along - fractions[index]) / (fractions[index + 1] - fractions[index])
-    flat = index + (np.arange(len(cumulative)) * cumulative.shape[1])[:, None]  # row-major (N, bins + 1)
-    values = cumulative.ravel()
-    low, high = values[flat], values[flat + 1]
-    return low + fraction * (high - low)
+def _by_range(amp: np.ndarray, range_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each row's targets (N, S) nearest first, those with no echo (amp 0) last; only rows with
+    several echoing targets need sorting."""
+    if amp.shape[1] == 1:
+        return range_m, amp
+    several = np.flatnonzero(np.count_nonzero(amp, axis=1) > 1)
+    ranges, amps = np.where(amp > 0, range_m, np.inf), amp.copy()
+    if len(several):
+        order = np.argsort(ranges[several], axis=1)
+        order += (several * amp.shape[1])[:, None]  # row-major flat positions
+        ranges[several], amps[several] = range_m.ravel().take(order), amp.ravel().take(order)
+    return ranges, amps
 
 
 def lms_first_echo(
@@ -199,6 +239,7 @@ def lms_first_echo(
     log_threshold_value: float,
     receiver: LmsReceiver,
     smoke_rows: np.ndarray | None = None,
+    fractions: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The pulsed receiver: (range_m, from_smoke, clean) per beam; range inf = no echo.
 
@@ -206,48 +247,61 @@ def lms_first_echo(
     (smoke bins, and the surfaces met so far) and stops at the first distance
     where it reaches the threshold. The echo is clean when `sharp_fraction`
     of the threshold arrived within the last `max_rise_m`. `smoke_amp` and
-    `edges_m` hold the beams `smoke_rows` (default: all); the others have no smoke.
+    `edges_m` hold the beams `smoke_rows` (default: all); the others have no
+    smoke. Every row's edges lie at the same `fractions` of its extent
+    (default: read off the edges).
     """
     threshold = float(np.exp(log_threshold_value))
     smoke_rows = np.arange(len(target_amp)) if smoke_rows is None else smoke_rows
-    cumulative = np.concatenate([np.zeros((len(smoke_amp), 1)), np.cumsum(smoke_amp, axis=1)], axis=1)
+    bins, window = smoke_amp.shape[1], receiver.window_m
+    cumulative = np.zeros((len(smoke_amp), bins + 1))
+    np.cumsum(smoke_amp, axis=1, out=cumulative[:, 1:])
+    total = cumulative[:, bins]  # bins hold no negative energy, so the cumulative never falls: this bounds every window
+    holding = np.flatnonzero(total > 0)  # every other row's windows hold exactly 0
+    lookup = _edge_lookup(edges_m, fractions)
+    start, length = edges_m[:, 0], edges_m[:, bins] - edges_m[:, 0]
 
-    span = cumulative.max(axis=1) - cumulative.min(axis=1)  # cumulative starts at 0: span 0 means no smoke energy
-    holding = np.flatnonzero(span > 0)  # every other beam's windows hold exactly 0
-    # a window holds at most the span (to within a few ulps): only these can trigger on smoke
-    reachable = np.flatnonzero(span >= threshold * (1.0 - 1e-9))
-    fractions = _edge_fractions(edges_m)
-
-    def rows_window(rows: np.ndarray, points_m: np.ndarray) -> np.ndarray:
-        """Smoke energy within the window ending at each point (R, K) of smoke `rows`: one interpolation for both ends."""
-        at = _cumulative_at(cumulative[rows], edges_m[rows], fractions, np.concatenate([points_m, points_m - receiver.window_m], axis=1))
-        return at[:, : points_m.shape[1]] - at[:, points_m.shape[1] :]
+    def energy_at(rows: np.ndarray, points_m: np.ndarray) -> np.ndarray:
+        """Cumulative smoke energy of `rows` at points (R, K); inf points take the whole smoke."""
+        along = points_m - start[rows, None]
+        along *= 1.0 / length[rows, None]
+        np.maximum(along, 0.0, out=along)
+        np.minimum(along, 1.0, out=along)
+        return lookup.interpolate(cumulative, rows, along)
 
     def smoke_window(points_m: np.ndarray) -> np.ndarray:
-        """The same for every beam's points (N, K)."""
-        windows = np.zeros(points_m.shape)
-        if len(holding):
-            beams = smoke_rows[holding]
-            windows[beams] = rows_window(holding, points_m[beams])
-        return windows
+        """Smoke energy of the rows `holding` within the window ending at each point (H, K)."""
+        at = energy_at(holding, np.concatenate([points_m, points_m - window], axis=1))
+        return at[:, : points_m.shape[1]] - at[:, points_m.shape[1] :]
 
-    order = np.argsort(np.where(target_amp > 0, target_range_m, np.inf), axis=1)
-    order += (np.arange(len(order)) * order.shape[1])[:, None]  # row-major flat positions
-    ranges, amps = target_range_m.ravel()[order], target_amp.ravel()[order]
+    ranges, amps = _by_range(target_amp, target_range_m)
+    beams = smoke_rows[holding]
+    energy_at_target = np.cumsum(amps, axis=1)
+    energy_at_target[beams] += smoke_window(ranges[beams])
+
     smoke_at = np.full(len(ranges), np.inf)
+    # only these rows' windows can reach the threshold (to within a few ulps of the window sums)
+    reachable = np.flatnonzero(total >= threshold * (1.0 - 1e-9))
     if len(reachable):
-        smoke_at[smoke_rows[reachable]] = _crossing_on_grid(rows_window(reachable, edges_m[reachable]), edges_m[reachable], threshold)
-    energy_at_target = smoke_window(ranges) + np.cumsum(amps, axis=1)
+        # at a bin edge the cumulative is exact; the window's far end lies before the smoke (adding 0)
+        # unless the smoke is longer than the window
+        at_edges = cumulative[reachable]
+        long = np.flatnonzero(length[reachable] > window)
+        if len(long):
+            long_rows = reachable[long]
+            at_edges[long] -= energy_at(long_rows, edges_m[long_rows] - window)
+        smoke_at[smoke_rows[reachable]] = _crossing_on_grid(at_edges, edges_m[reachable], threshold)
     reached = (energy_at_target >= threshold) & (amps > 0)
-    rows = np.arange(len(ranges))
     first_target = np.argmax(reached, axis=1)
-    target_at = np.where(reached.any(axis=1), ranges[rows, first_target], np.inf)
+    rows = np.arange(len(ranges))
+    target_at = np.where(reached[rows, first_target], ranges[rows, first_target], np.inf)
     from_smoke = smoke_at < target_at
     echo_m = np.minimum(smoke_at, target_at)
     energy_at_echo = np.where(from_smoke, threshold, energy_at_target[rows, first_target])
-    before = echo_m[:, None] - receiver.max_rise_m
-    with np.errstate(invalid="ignore"):
-        targets_before = np.where(ranges <= before, amps, 0.0).sum(axis=1)
-        gained = energy_at_echo - smoke_window(np.where(np.isfinite(before), before, 0.0))[:, 0] - targets_before
+    before = echo_m - receiver.max_rise_m
+    targets_before = ((ranges <= before[:, None]) * amps).sum(axis=1)  # absent targets (range inf) have amp 0
+    gained = energy_at_echo - targets_before
+    if len(holding):
+        gained[beams] -= smoke_window(np.where(np.isfinite(before[beams]), before[beams], 0.0)[:, None])[:, 0]
     clean = gained >= receiver.sharp_fraction * threshold
     return echo_m, from_smoke, clean
