@@ -21,7 +21,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Iterable, Mapping, Sequence
 
-from emulator.errors import SceneError
+from emulator.errors import SceneError, UserError
 from emulator.scene.geometry import MeshLoadError, load_mesh_file
 from emulator.scene.materials import BUILTIN_MATERIALS, DEFAULT_MATERIAL
 from emulator.scene.model import (
@@ -40,6 +40,7 @@ from emulator.scene.model import (
     Sphere,
     Vec3,
 )
+from emulator.transport import Address, EndpointClaims, TcpAddress, parse_endpoint
 
 BUNDLED_PACKAGE = "emulator.bundled_scenes"
 SCENE_SUFFIX = ".toml"
@@ -72,7 +73,6 @@ LMS_ANGLES_DEG = (180, 100)
 LMS_RESOLUTIONS_DEG = (1.0, 0.5, 0.25)
 
 _PRINTABLE_ASCII = re.compile(r"[\x20-\x7e]*")
-_PORT = re.compile(r"[0-9]{1,5}")
 _TOML_LOCATION = re.compile(r"^(?P<message>.*) \(at line (?P<line>\d+), column (?P<column>\d+)\)$")
 _MISSING: Any = object()
 
@@ -472,19 +472,18 @@ def _plumes(tables: list[_Table]) -> tuple[Plume, ...]:
 # --------------------------------------------------------------------------- sensors
 
 
-def _endpoint_identity(text: str, place: _Place) -> tuple[Any, ...]:
-    """What two endpoints must not share: a pty's normalised path, a TCP host and port."""
-    scheme, _, rest = text.partition(":")
-    if scheme == "pty" and rest:
-        return ("pty", os.path.normpath(rest))
-    if scheme == "tcp":
-        host, _, port = rest.rpartition(":")
-        if host and _PORT.fullmatch(port) and 1 <= int(port) <= 65535:
-            return ("tcp", host.lower(), int(port))
-    raise place.error(f'expected "pty:PATH" or "tcp:HOST:PORT" with PORT 1..65535, got {_show(text)}')
+def _endpoint_address(text: str, place: _Place) -> Address:
+    """`pty:PATH` or `tcp:HOST:PORT`, parsed as `serve` will; a scene names a real port (not 0)."""
+    try:
+        address = parse_endpoint(text)
+    except UserError:
+        address = None
+    if address is None or (isinstance(address, TcpAddress) and address.port == 0):
+        raise place.error(f'expected "pty:PATH" or "tcp:HOST:PORT" with PORT 1..65535, got {_show(text)}')
+    return address
 
 
-def _endpoints(table: _Table, owners: dict[tuple[Any, ...], str], sensor: str) -> tuple[str, ...]:
+def _endpoints(table: _Table, claims: EndpointClaims, sensor: str) -> tuple[str, ...]:
     place = table.place.key("endpoints")
     raw = table.raw("endpoints", [])
     if not isinstance(raw, list):
@@ -493,10 +492,12 @@ def _endpoints(table: _Table, owners: dict[tuple[Any, ...], str], sensor: str) -
     for position, item in enumerate(raw):
         item_place = place.index(position)
         text = _as_string(item, item_place)
-        identity = _endpoint_identity(text, item_place)
-        if identity in owners:
-            raise item_place.error(f"endpoint {_show(text)} already used by sensor {_show(owners[identity])}")
-        owners[identity] = sensor
+        address = _endpoint_address(text, item_place)
+        clash = claims.claim(address, sensor)
+        if clash is not None:
+            taken, owner = clash
+            spelled = "" if str(taken) == str(address) else f" as {_show(str(taken))}"
+            raise item_place.error(f"endpoint {_show(text)} already used by sensor {_show(owner)}{spelled}")
         endpoints.append(text)
     return tuple(endpoints)
 
@@ -531,7 +532,7 @@ def _lms_options(table: _Table) -> dict[str, Any]:
 
 def _sensors(tables: list[_Table]) -> tuple[SensorSpec, ...]:
     seen: dict[str, str] = {}
-    owners: dict[tuple[Any, ...], str] = {}
+    claims = EndpointClaims()
     sensors = []
     for table in tables:
         name = table.name(seen)
@@ -541,6 +542,6 @@ def _sensors(tables: list[_Table]) -> tuple[SensorSpec, ...]:
         if foreign:
             raise table.place.key(foreign).error(f"is an option of {other_model}, not of {model}")
         options = _urg_options(table) if model == "urg-04lx" else _lms_options(table)
-        endpoints = _endpoints(table, owners, name)
+        endpoints = _endpoints(table, claims, name)
         sensors.append(SensorSpec(name, model, table.pose(), endpoints, MappingProxyType(options)))
     return tuple(sensors)

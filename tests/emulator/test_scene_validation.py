@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 
 import pytest
@@ -131,9 +132,23 @@ CASES = [
     (URG + 'endpoints = ["tcp:127.0.0.1:10940"]\n' + LMS + 'endpoints = ["tcp:127.0.0.1:10940"]',
      'sensors[1].endpoints[0]: endpoint "tcp:127.0.0.1:10940" already used by sensor "urg"'),
     (URG + 'endpoints = ["pty:ttyA"]\n' + LMS + 'endpoints = ["pty:/dev/null", "pty:./ttyA"]',
-     'sensors[1].endpoints[1]: endpoint "pty:./ttyA" already used by sensor "urg"'),
+     'sensors[1].endpoints[1]: endpoint "pty:./ttyA" already used by sensor "urg" as "pty:ttyA"'),
     (URG + 'endpoints = ["tcp:LocalHost:1", "tcp:localhost:1"]',
-     'sensors[0].endpoints[1]: endpoint "tcp:localhost:1" already used by sensor "urg"'),
+     'sensors[0].endpoints[1]: endpoint "tcp:localhost:1" already used by sensor "urg" as "tcp:LocalHost:1"'),
+    # a wildcard host owns its port on every address; localhost is 127.0.0.1; [::1] is ::1
+    *[
+        (URG + f'endpoints = ["{first}"]\n' + LMS + f'endpoints = ["pty:ttyL", "{second}"]',
+         f'sensors[1].endpoints[1]: endpoint "{second}" already used by sensor "urg"' + (f' as "{shown}"' if shown else ""))
+        for first, second, shown in (
+            ("tcp:0.0.0.0:10940", "tcp:127.0.0.1:10940", "tcp:0.0.0.0:10940"),
+            ("tcp:127.0.0.2:10940", "tcp:0.0.0.0:10940", "tcp:127.0.0.2:10940"),
+            ("tcp:[::]:10940", "tcp:localhost:10940", "tcp:[::]:10940"),
+            ("tcp:*:10940", "tcp:[::1]:10940", "tcp:*:10940"),
+            ("tcp:0.0.0.0:10940", "tcp:[0::0]:10940", "tcp:0.0.0.0:10940"),
+            ("tcp:localhost:10940", "tcp:127.0.0.1:10940", "tcp:localhost:10940"),
+            ("tcp:[::1]:10940", "tcp:::1:10940", ""),  # one spelling once parsed: nothing to add
+        )
+    ],
     # urg-04lx options
     (URG + 'boot_protocol = "scip3"', 'sensors[0].boot_protocol: must be one of "scip2", "scip1", got "scip3"'),
     (URG + 'serial = "H0706400H0706400X"', 'sensors[0].serial: must be 1 to 16 characters, got 17: "H0706400H0706400X"'),
@@ -206,3 +221,17 @@ def test_a_file_that_is_not_utf8_is_rejected(tmp_path: Path) -> None:
     with pytest.raises(SceneError, match=r"^x\.toml: not UTF-8 text \(byte 16\)$"):
         load_scene(path)
 
+
+
+def test_one_port_on_different_specific_hosts_is_allowed(tmp_path: Path) -> None:
+    """Only the same host or a wildcard clashes: distinct addresses each bind the port."""
+    endpoints = {
+        "urg": ["tcp:127.0.0.1:10940", "tcp:0.0.0.0:10941"],
+        "lms": ["tcp:127.0.0.2:10940", "tcp:[::1]:10940", "tcp:[::1]:10942"],
+    }
+    text = "".join(
+        f'[[sensors]]\nname = "{name}"\nmodel = "{model}"\nendpoints = {json.dumps(endpoints[name])}\n'
+        for name, model in (("urg", "urg-04lx"), ("lms", "lms200"))
+    )
+    scene = load_scene(write_scene(tmp_path, text))
+    assert [list(sensor.endpoints) for sensor in scene.sensors] == [endpoints["urg"], endpoints["lms"]]
