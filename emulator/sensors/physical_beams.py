@@ -100,9 +100,15 @@ def _region_path_to(hits: BeamHits, rows: np.ndarray, limits: np.ndarray) -> np.
     for region in hits.regions:
         if region.density <= 0:
             continue
-        entry, exit_ = region.entry_m[rows][:, None, :], region.exit_m[rows][:, None, :]
-        limit = limits[:, :, None]
-        total += region.density * (np.minimum(exit_, limit) - np.minimum(entry, limit)).sum(axis=2)
+        entry, exit_ = region.entry_m[rows], region.exit_m[rows]
+        if entry.shape[1] == 1:  # one interval per beam (a convex region): no sum over intervals
+            inside = np.minimum(exit_, limits)
+            inside -= np.minimum(entry, limits)
+        else:
+            limit = limits[:, :, None]
+            inside = (np.minimum(exit_[:, None, :], limit) - np.minimum(entry[:, None, :], limit)).sum(axis=2)
+        inside *= region.density
+        total += inside
     return total
 
 
@@ -295,15 +301,44 @@ def _smoke_echoes(
     params: PhysicalParams,
 ) -> SmokeEchoes:
     rows = np.flatnonzero(np.isfinite(start) & (end > start)) if params.backscatter else np.zeros(0, dtype=np.int64)
-    low, high = start[rows], end[rows]
-    fractions = bin_fractions(params)
-    edges = low[:, None] + (high - low)[:, None] * fractions
-    puff_path = crossings.optical_path_on_grid(rows, low, high - low, fractions)
-    path = factor[rows, None] * (_region_path_to(hits, rows, edges) + puff_path)
-    width = edges[:, 1:] - edges[:, :-1]
-    local_extinction = extinction * (path[:, 1:] - path[:, :-1]) / np.where(width > 0, width, 1.0)
-    multiple_scattering = 1.0 + (local_extinction / params.multiple_scattering_extinction) ** 3
-    share = receiver.volume_gain * params.backscatter_ratio * multiple_scattering
-    transmission = np.exp(-2.0 * extinction * path)
-    mid = 0.5 * (edges[:, 1:] + edges[:, :-1])
-    return SmokeEchoes(rows, smoke_bin_echo(transmission, share, mid, receiver, params), mid, edges, fractions)
+    low = start[rows]
+    length = end[rows] - low
+    grid = _smoke_grid(params)
+    edges = low[:, None] + length[:, None] * grid.fractions
+    path = _region_path_to(hits, rows, edges)
+    path += crossings.optical_path_on_grid(rows, low, length, grid.fractions)
+    path *= factor[rows, None]
+    # each bin's mean extinction over its width, length × the bin's fraction of the extent
+    scattering = path[:, 1:] - path[:, :-1]
+    scattering *= grid.inverse_widths * (extinction / params.multiple_scattering_extinction)
+    scattering *= (1.0 / length)[:, None]
+    share = scattering * scattering
+    share *= scattering
+    share += 1.0
+    share *= receiver.volume_gain * params.backscatter_ratio  # raised by multiple scattering in dense smoke
+    transmission = np.exp(path * (-2.0 * extinction))
+    mid = low[:, None] + length[:, None] * grid.middles
+    return SmokeEchoes(rows, smoke_bin_echo(transmission, share, mid, receiver, params), mid, edges, grid.fractions)
+
+
+@dataclass(frozen=True)
+class _SmokeGrid:
+    """The range bins along a beam's smoke as fractions of its extent: edges (M+1,), middles (M,),
+    1 / widths (M,). Read-only, computed once per parameter set."""
+
+    fractions: np.ndarray
+    middles: np.ndarray
+    inverse_widths: np.ndarray
+
+
+@functools.lru_cache(maxsize=16)
+def _smoke_grid_of(bins: int, growth: float) -> _SmokeGrid:
+    fractions = _bin_fractions(bins, growth)
+    grid = _SmokeGrid(fractions, 0.5 * (fractions[1:] + fractions[:-1]), 1.0 / np.diff(fractions))
+    grid.middles.flags.writeable = False
+    grid.inverse_widths.flags.writeable = False
+    return grid
+
+
+def _smoke_grid(params: PhysicalParams) -> _SmokeGrid:
+    return _smoke_grid_of(params.bins, params.bin_growth)
