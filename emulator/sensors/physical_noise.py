@@ -40,9 +40,16 @@ def fluctuation_field(seed: int, sensor: str, angles_rad: np.ndarray, time_s: fl
     wavenumber, frequency, phase = _fluctuation_modes(
         seed, sensor, params.fluctuation_modes, params.fluctuation_angle_deg, params.fluctuation_time_s
     )
-    along_angle = _FIELD_ANGLES.get((angles_rad, wavenumber), None, lambda: _read_only(np.outer(angles_rad, wavenumber)))
-    argument = along_angle + frequency * time_s + phase
-    return np.sqrt(2.0 / params.fluctuation_modes) * np.cos(argument).sum(axis=1)
+    # cos(k a + w t + p) = cos(k a) cos(w t + p) - sin(k a) sin(w t + p): the angle part is fixed per sensor
+    along_angle = _FIELD_ANGLES.get((angles_rad, wavenumber), params.fluctuation_modes, lambda: _angle_modes(angles_rad, wavenumber))
+    in_time = frequency * time_s + phase
+    return along_angle @ np.concatenate([np.cos(in_time), np.sin(in_time)])
+
+
+def _angle_modes(angles_rad: np.ndarray, wavenumber: np.ndarray) -> np.ndarray:
+    """sqrt(2 / modes) × [cos(k a), -sin(k a)] (N, 2 modes): the field's angle part, kept per sensor."""
+    argument = np.outer(angles_rad, wavenumber)
+    return _read_only(np.sqrt(2.0 / len(wavenumber)) * np.concatenate([np.cos(argument), -np.sin(argument)], axis=1))
 
 
 @functools.lru_cache(maxsize=64)
