@@ -14,6 +14,9 @@ from pathlib import Path
 import pytest
 import serial
 
+from emulator.commands.serve import refuse_clashing_endpoints
+from emulator.errors import UserError
+from emulator.scene import load_scene
 from emulator.serve_process import ServeProcess, free_tcp_port, serve_command
 from protocols.lms2xx import build_telegram
 
@@ -184,6 +187,48 @@ def test_port_in_use_is_a_user_error_and_leaves_no_symlink(tmp_path: Path) -> No
     assert result.returncode == 2
     assert result.stderr == f"lrf-emulator serve: tcp:127.0.0.1:{port}: Address already in use\n"
     assert not os.path.lexists(tmp_path / "u")
+
+
+def test_an_override_onto_a_wildcard_of_a_port_another_sensor_keeps_is_refused_before_serving(tmp_path: Path) -> None:
+    """railway's urg keeps tcp:127.0.0.1:10940; 0.0.0.0 on that port could not be bound beside it."""
+    result = run_serve("railway", "--endpoint", "lms=tcp:0.0.0.0:10940", cwd=tmp_path)
+    assert result.returncode == 2
+    assert result.stderr == (
+        "lrf-emulator serve: --endpoint: endpoint tcp:0.0.0.0:10940 of sensor 'lms' already used by sensor 'urg'"
+        " as tcp:127.0.0.1:10940\n"
+    )
+    assert result.stdout == ""
+    assert not os.path.lexists(tmp_path / "ttyURG0")
+
+
+@pytest.mark.parametrize(
+    ("overrides", "expected"),
+    [
+        ({"urg": ["pty:ttyLMS0"]}, "endpoint pty:ttyLMS0 of sensor 'lms' already used by sensor 'urg'"),
+        ({"lms": ["tcp:[::]:10940"]},
+         "endpoint tcp:[::]:10940 of sensor 'lms' already used by sensor 'urg' as tcp:127.0.0.1:10940"),
+        ({"lms": ["tcp:localhost:10940"]},
+         "endpoint tcp:localhost:10940 of sensor 'lms' already used by sensor 'urg' as tcp:127.0.0.1:10940"),
+        ({"urg": ["tcp:*:7", "tcp:127.0.0.9:7"]},
+         "endpoint tcp:127.0.0.9:7 of sensor 'urg' already used by sensor 'urg' as tcp:*:7"),
+        ({"urg": ["pty:u", "tcp:0.0.0.0:10941"], "lms": ["tcp:0.0.0.0:10941"]},
+         "endpoint tcp:0.0.0.0:10941 of sensor 'lms' already used by sensor 'urg'"),
+    ],
+)
+def test_clashing_overrides_are_one_user_error(overrides: dict[str, list[str]], expected: str) -> None:
+    with pytest.raises(UserError) as raised:
+        refuse_clashing_endpoints(load_scene("railway"), overrides)
+    assert str(raised.value) == f"--endpoint: {expected}"
+
+
+def test_overrides_on_distinct_hosts_or_fresh_ports_are_accepted() -> None:
+    refuse_clashing_endpoints(
+        load_scene("railway"),
+        {
+            "urg": ["tcp:127.0.0.2:10940", "tcp:0.0.0.0:0", "tcp:127.0.0.1:0"],
+            "lms": ["tcp:[::1]:10940", "tcp:0.0.0.0:0"],
+        },
+    )
 
 
 SCENE_WITH_ENDPOINTS = """\
