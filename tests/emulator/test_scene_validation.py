@@ -138,7 +138,8 @@ CASES = [
     # a wildcard host owns its port on every address; localhost is 127.0.0.1; [::1] is ::1
     *[
         (URG + f'endpoints = ["{first}"]\n' + LMS + f'endpoints = ["pty:ttyL", "{second}"]',
-         f'sensors[1].endpoints[1]: endpoint "{second}" already used by sensor "urg"' + (f' as "{shown}"' if shown else ""))
+         f'sensors[1].endpoints[1]: endpoint "{second}" already used by sensor "urg"'
+         + (f' as "{shown}"' if shown else ""))
         for first, second, shown in (
             ("tcp:0.0.0.0:10940", "tcp:127.0.0.1:10940", "tcp:0.0.0.0:10940"),
             ("tcp:127.0.0.2:10940", "tcp:0.0.0.0:10940", "tcp:127.0.0.2:10940"),
