@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from emulator.optics import BeamHits, World
+from emulator.optics.hits import RegionCrossing
 from emulator.optics.kept import KeptPerArrays
 from emulator.optics.puffs import BeamPuffCrossings, Puffs, cross_beams
 from emulator.scene.material_optics import optics_for, patch_values
@@ -31,15 +32,22 @@ from emulator.sensors.response import Beams
 class Surfaces:
     """The surfaces in each beam's footprint, (N, S): S sub-rays, unused ones with amp 0.
 
-    `log_echo` is ln of the footprint's summed echo (N,), exact for a beam
-    with one surface; `amp` each sub-ray's share of the echo power;
-    `range_m` the range each would report (material range stretch included).
+    `log_each` is ln of each sub-ray's echo, `amp` its share of the echo
+    power; `range_m` the range each would report (material range stretch
+    included); `single` marks beams with one sub-ray.
     """
 
-    log_echo: np.ndarray
+    log_each: np.ndarray
     amp: np.ndarray
     range_m: np.ndarray
     present: np.ndarray
+    single: np.ndarray
+
+    @functools.cached_property
+    def log_echo(self) -> np.ndarray:
+        """ln of each footprint's summed echo (N,), exact for a beam with one surface."""
+        with np.errstate(divide="ignore"):
+            return np.where(self.single, self.log_each[:, 0], np.log(self.amp.sum(axis=1)))
 
 
 @dataclass(frozen=True)
@@ -71,27 +79,34 @@ def beam_physics(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, params:
     beam_end = hits.beam_end_m
     crossings = cross_beams(Puffs.from_particles(beams.world.particles_at(beams.time_s)), beams.origins, beams.directions, beam_end)
     geometry = _surface_geometry(hits, beams, receiver, params)
-    puff_to_end_and_surface = crossings.optical_path_to(geometry.end_and_surface_m)  # one pass for both limits
-    column = hits.region_optical_path + puff_to_end_and_surface[:, 0]
-    smoke_start, smoke_end = _smoke_extent(hits, crossings, beam_end)
+    puff_to_end_and_surfaces = crossings.optical_path_to(geometry.end_and_surfaces_m)  # one pass for every limit
+    column = hits.region_optical_path + puff_to_end_and_surfaces[:, 0]
+    smoke_start, smoke_end = _smoke_extent(hits, crossings, geometry)
     with np.errstate(invalid="ignore"):
         smoke_distance = np.where(np.isfinite(smoke_start), 0.5 * (smoke_start + smoke_end), 1.0)
     factor = fluctuation_factor(scene.seed, beams.sensor.name, beams.angles_rad, beams.time_s, column, smoke_distance, params)
-    surfaces = _surfaces(hits, beams, geometry, crossings, puff_to_end_and_surface[:, 1], factor, receiver, params)
+    surfaces = _surfaces(hits, geometry, puff_to_end_and_surfaces[:, 1:], factor, beams.scene.density_to_extinction)
     far_end = np.where(geometry.any_present, np.where(surfaces.present, surfaces.range_m, 0.0).max(axis=1), beam_end)
     smoke = _smoke_echoes(hits, crossings, factor, smoke_start, np.minimum(smoke_end, far_end), extinction, receiver, params)
     return BeamPhysics(surfaces, smoke, factor * column)
 
 
-def _smoke_extent(hits: BeamHits, crossings: BeamPuffCrossings, beam_end: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _smoke_extent(hits: BeamHits, crossings: BeamPuffCrossings, geometry: _SurfaceGeometry) -> tuple[np.ndarray, np.ndarray]:
     start, end = crossings.extent_m(len(hits))
+    for region, (entered_at, left_at) in zip(hits.regions, geometry.region_extents):
+        if region.density > 0:
+            np.minimum(start, entered_at, out=start)
+            np.maximum(end, left_at, out=end)
+    return start, np.minimum(end, hits.beam_end_m)
+
+
+def _region_extents(hits: BeamHits) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+    """Per region, where each beam first enters it before the beam's end and last leaves it (inf / -inf if never)."""
+    extents = []
     for region in hits.regions:
-        if region.density <= 0:
-            continue
-        entered = np.isfinite(region.entry_m) & (region.entry_m < beam_end[:, None])
-        start = np.minimum(start, np.where(entered, region.entry_m, np.inf).min(axis=1))
-        end = np.maximum(end, np.where(entered, region.exit_m, -np.inf).max(axis=1))
-    return start, np.minimum(end, beam_end)
+        entered = np.isfinite(region.entry_m) & (region.entry_m < hits.beam_end_m[:, None])
+        extents.append((np.where(entered, region.entry_m, np.inf).min(axis=1), np.where(entered, region.exit_m, -np.inf).max(axis=1)))
+    return tuple(extents)
 
 
 def _region_path_to(hits: BeamHits, rows: np.ndarray, limits: np.ndarray) -> np.ndarray:
@@ -139,9 +154,12 @@ class _SurfaceGeometry:
     present: np.ndarray  # used, with a surface in reach
     limits: np.ndarray  # range of each present surface, 0 elsewhere (an unused sub-ray's limit 0 adds exactly 0)
     any_present: np.ndarray  # (N,)
-    end_and_surface_m: np.ndarray  # (N, 2): each beam's end and its central sub-ray's limit
-    log_clear_air: np.ndarray  # ln of each sub-ray's echo without smoke
-    echoing: np.ndarray  # present sub-rays that can return an echo at all
+    end_and_surfaces_m: np.ndarray  # (N, 1 + S): each beam's end and its sub-rays' limits
+    log_clear_air: np.ndarray  # ln of each sub-ray's echo without smoke; -inf where it cannot echo at all
+    inverse_shares: np.ndarray  # (N, 1)
+    edge_region_lengths: tuple[np.ndarray, ...]  # per region, chord length (E, S) before each edge row's sub-rays
+    cast_is_central: np.ndarray  # (N,) 1.0 where the first sub-ray is the cast beam itself, 0.0 on edge rows
+    region_extents: tuple[tuple[np.ndarray, np.ndarray], ...]  # `_region_extents`
 
 
 _GEOMETRIES = KeptPerArrays()
@@ -184,58 +202,68 @@ def _footprint_surfaces(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, 
         points = beams.origins[patchy[0]] + beams.directions[patchy[0]] * ranges[patchy][:, None]
         reflectivity[patchy] *= np.exp(patchiness[patchy] * patch_values(points, beams.scene.seed))
     limits = np.where(present, ranges, 0.0)
-    end_and_surface = np.stack([hits.beam_end_m, limits[:, 0]], axis=1)
     cos_factor = cosine**angle_exponent
+    shares = used.sum(axis=1, keepdims=True)
+    can_echo = present & echoing(reflectivity, cos_factor, ranges)
+    edge_limits = np.minimum(ranges[edge_rows], hits.max_range_m)
+    cast_is_central = np.ones(n)
+    cast_is_central[edge_rows] = 0.0
     geometry = _SurfaceGeometry(
         ranges,
         stretch * 2.0 * beams.scene.density_to_extinction,
-        used.sum(axis=1, keepdims=True),
+        shares,
         used,
         edge_rows,
         present,
         limits,
         present.any(axis=1),
-        end_and_surface,
-        log_clear_air_echo(reflectivity, cos_factor, ranges, receiver, params),
-        present & echoing(reflectivity, cos_factor, ranges),
+        np.concatenate([hits.beam_end_m[:, None], limits], axis=1),
+        np.where(can_echo, log_clear_air_echo(reflectivity, cos_factor, ranges, receiver, params), -np.inf),
+        1.0 / shares,
+        tuple(_chords_before(region, edge_rows, edge_limits) for region in hits.regions),
+        cast_is_central,
+        _region_extents(hits),
     )
-    for field in dataclasses.fields(geometry):
-        getattr(geometry, field.name).flags.writeable = False
+    _lock(tuple(getattr(geometry, field.name) for field in dataclasses.fields(geometry)))
     return geometry
 
 
-def _surfaces(
-    hits: BeamHits,
-    beams: Beams,
-    geometry: _SurfaceGeometry,
-    crossings: BeamPuffCrossings,
-    puff_to_surface: np.ndarray,
-    factor: np.ndarray,
-    receiver: ReceiverOptics,
-    params: PhysicalParams,
-) -> Surfaces:
-    """`geometry`'s surfaces seen through this scan's smoke; `puff_to_surface` is the puffs'
-    optical path to each beam's central sub-ray (N,)."""
-    ranges, present, limits = geometry.ranges, geometry.present, geometry.limits
-    region_path = np.zeros(ranges.shape)
-    region_path[:, 0] = hits.region_optical_path
+def _lock(values: np.ndarray | tuple) -> None:
+    """Make the arrays in (nested tuples of) `values` read-only: they are kept and shared by later scans."""
+    if isinstance(values, tuple):
+        for value in values:
+            _lock(value)
+    else:
+        values.flags.writeable = False
+
+
+def _chords_before(region: RegionCrossing, rows: np.ndarray, limits: np.ndarray) -> np.ndarray:
+    """Chord length (R, S) of beams `rows` inside `region` before `limits` (R, S)."""
+    entry, exit_, limit = region.entry_m[rows][:, None, :], region.exit_m[rows][:, None, :], limits[:, :, None]
+    return (np.minimum(exit_, limit) - np.minimum(entry, limit)).sum(axis=2)
+
+
+def _surfaces(hits: BeamHits, geometry: _SurfaceGeometry, puff_to_surfaces: np.ndarray, factor: np.ndarray, extinction: float) -> Surfaces:
+    """`geometry`'s surfaces seen through this scan's smoke; `puff_to_surfaces` (N, S) is the puffs'
+    optical path to each sub-ray's surface (0 for unused sub-rays)."""
+    optical_path = puff_to_surfaces.copy()
+    optical_path[:, 0] += hits.region_optical_path * geometry.cast_is_central  # an edge row's sub-rays all differ from the cast beam
     edge_rows = geometry.edge_rows
     if len(edge_rows):
-        region_path[edge_rows] = _region_path_to(hits, edge_rows, np.minimum(ranges[edge_rows], hits.max_range_m))
-    puff_path = np.zeros(ranges.shape)  # an unused sub-ray's limit 0 would add exactly 0
-    puff_path[:, 0] = puff_to_surface
-    if len(edge_rows):
-        puff_path[edge_rows, 1:] = crossings.optical_path_to(limits[edge_rows, 1:], edge_rows)
-    optical_path = factor[:, None] * (region_path + puff_path)
-    extinction = beams.scene.density_to_extinction
-    log_each = np.where(geometry.echoing, geometry.log_clear_air - 2.0 * extinction * optical_path, -np.inf)
-    shares = geometry.shares
-    amp = np.exp(log_each) / shares
-    single = shares[:, 0] == 1
-    with np.errstate(divide="ignore"):
-        log_echo = np.where(single, log_each[:, 0], np.log(amp.sum(axis=1)))
-    apparent = ranges * (1.0 + geometry.stretch_per_path * optical_path)
-    return Surfaces(log_echo, amp, np.where(present, apparent, np.inf), present)
+        region_path = np.zeros((len(edge_rows), optical_path.shape[1]))
+        for region, chords in zip(hits.regions, geometry.edge_region_lengths):
+            if region.density > 0:
+                region_path += region.density * chords
+        optical_path[edge_rows] += region_path
+    optical_path *= factor[:, None]
+    log_each = optical_path * (-2.0 * extinction)
+    log_each += geometry.log_clear_air
+    amp = np.exp(log_each)
+    amp *= geometry.inverse_shares
+    apparent = geometry.stretch_per_path * optical_path
+    apparent += 1.0
+    apparent *= geometry.ranges  # inf where no surface is present
+    return Surfaces(log_each, amp, apparent, geometry.present, geometry.shares[:, 0] == 1)
 
 
 _SubRaySolids = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
