@@ -21,6 +21,7 @@ beams x puffs; only (beam, puff) pairs within `REACH_SIGMAS` are kept.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -110,29 +111,23 @@ class BeamPuffCrossings:
 
         `limits_m` is (N,) or (N, M): one or M distances per beam; the result
         has its shape. With `rows`, `limits_m` holds only those beams' limits.
+        Work runs on (M, pairs) arrays, so every pass is a long contiguous loop.
         """
         limits = np.asarray(limits_m, dtype=float)
-        result = np.zeros(limits.shape)
         if limits.size == 0 or len(self) == 0:
-            return result
-        per_beam = limits.reshape(len(limits), -1)
-        beam, pairs = self.beam, slice(None)
-        if rows is not None:
-            compact = np.full(max(int(self.beam.max(initial=-1)), int(np.max(rows, initial=-1))) + 1, -1)
-            compact[rows] = np.arange(len(rows))
-            beam = compact[self.beam]
-            pairs = beam >= 0
-            beam = beam[pairs]
-        standard = np.where(np.isfinite(per_beam), per_beam, 1e12)[beam]
-        standard -= self.along_m[pairs, None]
-        standard /= self.sigma[pairs, None]
+            return np.zeros(limits.shape)
+        per_limit = limits.reshape(len(limits), -1).T  # (M, N)
+        beam, along, sigma, before, column = self._in_rows(rows) if rows is not None else self._all_pairs
+        standard = np.where(np.isfinite(per_limit), per_limit, 1e12)[:, beam]
+        standard -= along
+        standard /= sigma
         contribution = normal_cdf(standard)
-        contribution -= self.before_origin[pairs, None]  # limits >= 0: the share is never below it
-        contribution *= self.column[pairs, None]
-        columns = per_beam.shape[1]
-        flat_index = (beam[:, None] * columns + np.arange(columns)).ravel()
-        totals = np.bincount(flat_index, weights=contribution.ravel(), minlength=per_beam.size)
-        return totals.reshape(limits.shape)
+        contribution -= before  # limits >= 0: the share is never below it
+        contribution *= column
+        count = per_limit.shape[1]
+        flat_index = np.add.outer(np.arange(0, per_limit.size, count), beam).ravel()
+        totals = np.bincount(flat_index, weights=contribution.ravel(), minlength=per_limit.size)
+        return np.ascontiguousarray(totals.reshape(per_limit.shape).T).reshape(limits.shape)
 
     def optical_path_on_grid(self, rows: np.ndarray, start_m: np.ndarray, length_m: np.ndarray, fractions: np.ndarray) -> np.ndarray:
         """`optical_path_to` at the distances start + length × fractions (R, F) of beams `rows`.
@@ -141,44 +136,62 @@ class BeamPuffCrossings:
         its nearly 0 head (the table's value at -6 sigma) before its window of
         ±6 sigma and its nearly full column after it, and only the few grid
         points inside that window need the CDF. Lengths must be positive.
+        Work runs on the grid transposed (F, R), so sums along it are contiguous.
         """
-        result = np.zeros((len(rows), len(fractions)))
         if len(rows) == 0 or len(self) == 0:
-            return result
-        compact = np.full(max(int(self.beam.max()), int(rows.max())) + 1, -1)
-        compact[rows] = np.arange(len(rows))
-        beam = compact[self.beam]
-        pairs = beam >= 0
-        beam, along, sigma = beam[pairs], self.along_m[pairs], self.sigma[pairs]
-        column, before = self.column[pairs], self.before_origin[pairs]
+            return np.zeros((len(rows), len(fractions)))
+        beam, along, sigma, before, column = self._in_rows(rows)
         start, length = start_m[beam], length_m[beam]
         first = np.searchsorted(fractions, (along - _CDF_LIMIT * sigma - start) / length, side="right")
         past = np.maximum(first, np.searchsorted(fractions, (along + _CDF_LIMIT * sigma - start) / length, side="left"))
         count, width = len(rows), len(fractions)
         # every grid point sees the head; from `past` on, the rest of the column (a step, summed by cumsum)
         head = np.bincount(beam, weights=column * (_CDF_HEAD - before), minlength=count)
-        steps = np.bincount(beam * (width + 1) + past, weights=column * (_CDF_TAIL - _CDF_HEAD), minlength=count * (width + 1))
-        result += head[:, None]
-        result += np.cumsum(steps.reshape(count, width + 1)[:, :width], axis=1)
+        steps = np.bincount(past * count + beam, weights=column * (_CDF_TAIL - _CDF_HEAD), minlength=(width + 1) * count)
+        result = np.cumsum(steps.reshape(width + 1, count)[:width], axis=0)
+        result += head
         inside = past - first
         pair = np.repeat(np.arange(len(beam)), inside)
-        point = np.repeat(beam * width + first - (np.cumsum(inside) - inside), inside) + np.arange(len(pair))  # row-major (count, width)
-        standard = (start_m[:, None] + length_m[:, None] * fractions).ravel()[point]  # the grid once, not per pair
+        point = np.repeat(beam + (first - (np.cumsum(inside) - inside)) * count, inside) + np.arange(0, len(pair) * count, count)
+        standard = (start_m + fractions[:, None] * length_m).ravel()[point]  # the grid once, not per pair
         standard -= along[pair]
         standard /= sigma[pair]
         contribution = normal_cdf(standard)
         contribution -= _CDF_HEAD
         contribution *= column[pair]
-        result += np.bincount(point, weights=contribution, minlength=count * width).reshape(count, width)
-        return result
+        result += np.bincount(point, weights=contribution, minlength=count * width).reshape(width, count)
+        return np.ascontiguousarray(result.T)
 
     def extent_m(self, n_beams: int) -> tuple[np.ndarray, np.ndarray]:
-        """Per beam, where puff smoke starts and ends (REACH_SIGMAS around the centres; inf/−inf if none)."""
+        """Per beam, where puff smoke starts and ends (REACH_SIGMAS around the centres; inf/−inf if none).
+
+        Pairs sorted by beam reduce per beam with reduceat (ufunc.at is slow)."""
         start = np.full(n_beams, np.inf)
         end = np.full(n_beams, -np.inf)
-        np.minimum.at(start, self.beam, np.maximum(self.along_m - REACH_SIGMAS * self.sigma, 0.0))
-        np.maximum.at(end, self.beam, self.along_m + REACH_SIGMAS * self.sigma)
+        if len(self) == 0:
+            return start, end
+        order = self.beam.argsort(kind="stable")
+        beam, along, reach = self.beam[order], self.along_m[order], REACH_SIGMAS * self.sigma[order]
+        first = np.concatenate(([0], (beam[1:] != beam[:-1]).nonzero()[0] + 1))
+        start[beam[first]] = np.minimum.reduceat(np.maximum(along - reach, 0.0), first)
+        end[beam[first]] = np.maximum.reduceat(along + reach, first)
         return start, end
+
+    @property
+    def _all_pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        return self.beam, self.along_m, self.sigma, self.before_origin, self.column
+
+    def _in_rows(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The pairs whose beam is in `rows`, their beam given as its position in `rows`."""
+        position = np.full(max(self._last_beam, int(rows.max(initial=-1))) + 1, -1)
+        position[rows] = np.arange(len(rows))
+        position = position[self.beam]
+        kept = np.flatnonzero(position >= 0)
+        return position[kept], self.along_m[kept], self.sigma[kept], self.before_origin[kept], self.column[kept]
+
+    @cached_property
+    def _last_beam(self) -> int:
+        return int(self.beam.max())
 
 
 def cross_beams(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray) -> BeamPuffCrossings:
@@ -192,23 +205,41 @@ def cross_beams(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_
     if len(puffs) == 0 or len(origins) == 0:
         return _no_crossings()
     puffs = _near_segments(puffs, origins, directions, beam_end_m)
-    fan = _fan_pairs(puffs, origins, directions)
+    if len(puffs) == 0:
+        return _no_crossings()
+    fan = _fan_of(origins, directions)
     if fan is not None:  # a fan has one origin: each puff's offset and distance once, not once per pair
-        beam, puff, puff_offset = fan
-        offset, distance_sq = puff_offset[puff], np.einsum("ij,ij->i", puff_offset, puff_offset)[puff]
+        offset = puffs.centers - origins[0]
+        beam, puff = _fan_pairs(fan, puffs, offset)
+        distance_sq = _dot_columns(offset.T, offset.T)[puff]
+        along = _dot_columns(offset.T[:, puff], fan.directions_by_axis[:, beam])
     else:
         beam, puff = _all_pairs(len(origins), len(puffs))
         offset = puffs.centers[puff] - origins[beam]
-        distance_sq = np.einsum("ij,ij->i", offset, offset)
-    along = np.einsum("ij,ij->i", offset, directions[beam])
+        distance_sq = _dot_columns(offset.T, offset.T)
+        along = _dot_columns(offset.T, directions[beam].T)
+    reach_of_puff = REACH_SIGMAS * puffs.sigma
+    reach = reach_of_puff[puff]
+    reach_sq = (reach_of_puff * reach_of_puff)[puff]
     miss_sq = np.maximum(distance_sq - along * along, 0.0)
+    ahead = (along > 0) | (distance_sq < reach_sq)  # a puff behind the origin and out of reach adds < 0.2 %
+    near = ((miss_sq < reach_sq) & ahead & (along < beam_end_m[beam] + reach)).nonzero()[0]
+    beam, puff, along, miss_sq = beam[near], puff[near], along[near], miss_sq[near]
     sigma = puffs.sigma[puff]
-    reach = REACH_SIGMAS * sigma
-    ahead = (along > 0) | (distance_sq < reach * reach)  # a puff behind the origin and out of reach adds < 0.2 %
-    near = (miss_sq < reach * reach) & ahead & (along < beam_end_m[beam] + reach)
-    beam, puff, along, miss_sq, sigma = beam[near], puff[near], along[near], miss_sq[near], sigma[near]
-    column = puffs.peak_density[puff] * np.sqrt(2.0 * np.pi) * sigma * np.exp(-miss_sq / (2.0 * sigma * sigma))
+    central_column = puffs.peak_density * _SQRT_2PI * puffs.sigma  # per puff, then per pair: the same products
+    column = central_column[puff] * np.exp(-miss_sq / (2.0 * puffs.sigma * puffs.sigma)[puff])
     return BeamPuffCrossings(beam, along, sigma, column, normal_cdf(-along / sigma))
+
+
+_SQRT_2PI = np.sqrt(2.0 * np.pi)
+
+
+def _dot_columns(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise dot products of (3, n) arrays, summed in einsum's order ((x + z) + y) for the same bits."""
+    product = a * b
+    total = product[0] + product[2]
+    total += product[1]
+    return total
 
 
 def _no_crossings() -> BeamPuffCrossings:
@@ -224,13 +255,15 @@ def _all_pairs(n_beams: int, n_puffs: int) -> tuple[np.ndarray, np.ndarray]:
 @dataclass(frozen=True)
 class _Fan:
     """A fan's plane (`first`, `second` in it, `normal`) and its beams' angles in it, ascending;
-    `axes` (3, 3) holds (normal, first, second) as columns, to project offsets in one pass."""
+    `axes` (3, 3) holds (normal, first, second) as columns, to project offsets in one pass;
+    `directions_by_axis` (3, N) the beams' directions, one contiguous row per axis."""
 
     first: np.ndarray
     second: np.ndarray
     normal: np.ndarray
     beam_angle: np.ndarray
     axes: np.ndarray
+    directions_by_axis: np.ndarray
 
 
 _FANS = KeptPerArrays()
@@ -258,22 +291,19 @@ def _fan_geometry(origins: np.ndarray, directions: np.ndarray) -> _Fan | None:
     if np.any(np.diff(beam_angle) <= 0):
         return None
     axes = np.stack([normal, first, second], axis=1)
-    for array in (first, second, normal, beam_angle, axes):
+    directions_by_axis = np.ascontiguousarray(directions.T)
+    for array in (first, second, normal, beam_angle, axes, directions_by_axis):
         array.flags.writeable = False  # kept and shared by later scans
-    return _Fan(first, second, normal, beam_angle, axes)
+    return _Fan(first, second, normal, beam_angle, axes, directions_by_axis)
 
 
-def _fan_pairs(puffs: Puffs, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """Candidate (beam, puff) pairs of a fan of beams and each puff's offset from its origin,
-    or None if the beams are no fan."""
-    fan = _fan_of(origins, directions)
-    if fan is None:
-        return None
+def _fan_pairs(fan: _Fan, puffs: Puffs, offset: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Candidate (beam, puff) pairs of a fan of beams, given each puff's `offset` from its origin:
+    the beams within each puff's angular reach, grouped by puff, ascending."""
     beam_angle, axes = fan.beam_angle, fan.axes
-    offset = puffs.centers - origins[0]
     # each column as _dot computes it: o0·a0 + o1·a1 + o2·a2
     projected = offset[:, :1] * axes[0] + offset[:, 1:2] * axes[1] + offset[:, 2:] * axes[2]
-    height, x, y = projected[:, 0], projected[:, 1], projected[:, 2]
+    height, x, y = projected.T
     reach = REACH_SIGMAS * puffs.sigma
     in_plane = np.sqrt(np.maximum(reach * reach - height * height, 0.0))
     distance = np.hypot(x, y)
@@ -281,20 +311,23 @@ def _fan_pairs(puffs: Puffs, origins: np.ndarray, directions: np.ndarray) -> tup
     with np.errstate(divide="ignore", invalid="ignore"):
         half_width = np.where(around_origin, np.pi, np.arcsin(np.minimum(np.maximum(in_plane / distance, 0.0), 1.0)))
     centre = np.arctan2(y, x)
+    out_of_plane = np.abs(height) >= reach
+    wraps = bool((np.abs(centre) + half_width).max() >= np.pi)  # fl(c - w) = -fl(-c + w): the same test
     beams, puff_of = [], []
-    wraps = bool(np.max(np.abs(centre) + half_width, initial=-np.inf) >= np.pi)  # fl(c - w) = -fl(-c + w): the same test
     for turn in (-2.0 * np.pi, 0.0, 2.0 * np.pi) if wraps else (0.0,):  # an interval may wrap around ±pi
-        low = np.searchsorted(beam_angle, centre + turn - half_width, side="left")
-        high = np.searchsorted(beam_angle, centre + turn + half_width, side="right")
+        low = beam_angle.searchsorted(centre + turn - half_width, side="left")
+        high = beam_angle.searchsorted(centre + turn + half_width, side="right")
         if turn:
-            high = np.where(around_origin, low, high)
+            high[around_origin] = low[around_origin]
         else:
-            low, high = np.where(around_origin, 0, low), np.where(around_origin, len(beam_angle), high)
-        high = np.where(np.abs(height) < reach, high, low)
+            low[around_origin], high[around_origin] = 0, len(beam_angle)
+        high[out_of_plane] = low[out_of_plane]
         counts = high - low
-        puff_of.append(np.repeat(np.arange(len(puffs)), counts))
-        beams.append(np.repeat(low - np.concatenate([[0], np.cumsum(counts)[:-1]]), counts) + np.arange(counts.sum()))
-    return np.concatenate(beams), np.concatenate(puff_of), offset
+        puff_of.append(np.arange(len(puffs)).repeat(counts))
+        beams.append((low + counts - counts.cumsum()).repeat(counts) + np.arange(len(puff_of[-1])))
+    if len(beams) == 1:
+        return beams[0], puff_of[0]
+    return np.concatenate(beams), np.concatenate(puff_of)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -311,7 +344,7 @@ def _near_segments(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, be
     """The puffs within reach of the box bounding all beam segments (a cheap first cut)."""
     lower, upper = _BOXES.get((origins, directions, beam_end_m), None, lambda: _segments_box(origins, directions, beam_end_m))
     reach = REACH_SIGMAS * puffs.sigma[:, None]
-    keep = np.all((puffs.centers + reach >= lower) & (puffs.centers - reach <= upper), axis=1)
+    keep = ((puffs.centers + reach >= lower) & (puffs.centers - reach <= upper)).all(axis=1)
     return Puffs(puffs.centers[keep], puffs.sigma[keep], puffs.peak_density[keep])
 
 
