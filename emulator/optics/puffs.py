@@ -107,27 +107,25 @@ class BeamPuffCrossings:
         return len(self.beam)
 
     def optical_path_to(self, limits_m: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
-        """Puff optical path from each beam's origin to `limits_m`.
+        """Puff optical path from each beam's origin to `limits_m` (>= 0; inf or NaN: the whole way).
 
         `limits_m` is (N,) or (N, M): one or M distances per beam; the result
         has its shape. With `rows`, `limits_m` holds only those beams' limits.
-        Work runs on (M, pairs) arrays, so every pass is a long contiguous loop.
         """
         limits = np.asarray(limits_m, dtype=float)
         if limits.size == 0 or len(self) == 0:
             return np.zeros(limits.shape)
-        per_limit = limits.reshape(len(limits), -1).T  # (M, N)
+        per_beam = limits.reshape(len(limits), -1)
         beam, along, sigma, before, column = self._in_rows(rows) if rows is not None else self._all_pairs
-        standard = np.where(np.isfinite(per_limit), per_limit, 1e12)[:, beam]
-        standard -= along
-        standard /= sigma
+        standard = np.fmin(per_beam, 1e12).take(beam, axis=0)  # 1e12: past every puff, whatever the limit
+        standard -= along[:, None]
+        standard /= sigma[:, None]
         contribution = normal_cdf(standard)
-        contribution -= before  # limits >= 0: the share is never below it
-        contribution *= column
-        count = per_limit.shape[1]
-        flat_index = np.add.outer(np.arange(0, per_limit.size, count), beam).ravel()
-        totals = np.bincount(flat_index, weights=contribution.ravel(), minlength=per_limit.size)
-        return np.ascontiguousarray(totals.reshape(per_limit.shape).T).reshape(limits.shape)
+        contribution -= before[:, None]  # limits >= 0: the share is never below it
+        contribution *= column[:, None]
+        columns = per_beam.shape[1]
+        flat_index = (beam[:, None] * columns + np.arange(columns)).ravel() if columns > 1 else beam
+        return np.bincount(flat_index, weights=contribution.ravel(), minlength=per_beam.size).reshape(limits.shape)
 
     def optical_path_on_grid(self, rows: np.ndarray, start_m: np.ndarray, length_m: np.ndarray, fractions: np.ndarray) -> np.ndarray:
         """`optical_path_to` at the distances start + length × fractions (R, F) of beams `rows`.
@@ -136,29 +134,34 @@ class BeamPuffCrossings:
         its nearly 0 head (the table's value at -6 sigma) before its window of
         ±6 sigma and its nearly full column after it, and only the few grid
         points inside that window need the CDF. Lengths must be positive.
-        Work runs on the grid transposed (F, R), so sums along it are contiguous.
+        Work runs on the grid transposed (F, R), so each step's sum runs along a contiguous row.
         """
         if len(rows) == 0 or len(self) == 0:
             return np.zeros((len(rows), len(fractions)))
         beam, along, sigma, before, column = self._in_rows(rows)
-        start, length = start_m[beam], length_m[beam]
-        first = np.searchsorted(fractions, (along - _CDF_LIMIT * sigma - start) / length, side="right")
-        past = np.maximum(first, np.searchsorted(fractions, (along + _CDF_LIMIT * sigma - start) / length, side="left"))
+        if len(beam) == 0:
+            return np.zeros((len(rows), len(fractions)))
+        start, length = start_m.take(beam), length_m.take(beam)
+        window = _CDF_LIMIT * sigma
+        first = fractions.searchsorted((along - window - start) / length, side="right")
+        past = np.maximum(first, fractions.searchsorted((along + window - start) / length, side="left"))
         count, width = len(rows), len(fractions)
-        # every grid point sees the head; from `past` on, the rest of the column (a step, summed by cumsum)
+        # every grid point sees the head; from `past` on, the rest of the column (a step, summed row after row)
         head = np.bincount(beam, weights=column * (_CDF_HEAD - before), minlength=count)
-        steps = np.bincount(past * count + beam, weights=column * (_CDF_TAIL - _CDF_HEAD), minlength=(width + 1) * count)
-        result = np.cumsum(steps.reshape(width + 1, count)[:width], axis=0)
+        result = np.bincount(past * count + beam, weights=column * (_CDF_TAIL - _CDF_HEAD), minlength=(width + 1) * count)
+        result = result[:-count].reshape(width, count)
+        for point in range(1, width):  # a running sum over the F rows (np.cumsum on short columns is slower)
+            result[point] += result[point - 1]
         result += head
         inside = past - first
-        pair = np.repeat(np.arange(len(beam)), inside)
-        point = np.repeat(beam + (first - (np.cumsum(inside) - inside)) * count, inside) + np.arange(0, len(pair) * count, count)
-        standard = (start_m + fractions[:, None] * length_m).ravel()[point]  # the grid once, not per pair
-        standard -= along[pair]
-        standard /= sigma[pair]
+        ends = inside.cumsum()
+        point = (beam + (first - ends + inside) * count).repeat(inside) + np.arange(0, ends[-1] * count, count)
+        standard = (start_m + fractions[:, None] * length_m).ravel().take(point)  # the grid once, not per pair
+        standard -= along.repeat(inside)
+        standard /= sigma.repeat(inside)
         contribution = normal_cdf(standard)
         contribution -= _CDF_HEAD
-        contribution *= column[pair]
+        contribution *= column.repeat(inside)
         result += np.bincount(point, weights=contribution, minlength=count * width).reshape(width, count)
         return np.ascontiguousarray(result.T)
 
@@ -171,10 +174,10 @@ class BeamPuffCrossings:
         if len(self) == 0:
             return start, end
         order = self.beam.argsort(kind="stable")
-        beam, along, reach = self.beam[order], self.along_m[order], REACH_SIGMAS * self.sigma[order]
+        beam, along, reach = self.beam.take(order), self.along_m.take(order), REACH_SIGMAS * self.sigma.take(order)
         first = np.concatenate(([0], (beam[1:] != beam[:-1]).nonzero()[0] + 1))
-        start[beam[first]] = np.minimum.reduceat(np.maximum(along - reach, 0.0), first)
-        end[beam[first]] = np.maximum.reduceat(along + reach, first)
+        start[beam.take(first)] = np.minimum.reduceat(np.maximum(along - reach, 0.0), first)
+        end[beam.take(first)] = np.maximum.reduceat(along + reach, first)
         return start, end
 
     @property
@@ -185,9 +188,11 @@ class BeamPuffCrossings:
         """The pairs whose beam is in `rows`, their beam given as its position in `rows`."""
         position = np.full(max(self._last_beam, int(rows.max(initial=-1))) + 1, -1)
         position[rows] = np.arange(len(rows))
-        position = position[self.beam]
-        kept = np.flatnonzero(position >= 0)
-        return position[kept], self.along_m[kept], self.sigma[kept], self.before_origin[kept], self.column[kept]
+        position = position.take(self.beam)
+        kept = (position >= 0).nonzero()[0]
+        if len(kept) == len(position):
+            return position, self.along_m, self.sigma, self.before_origin, self.column
+        return position.take(kept), self.along_m.take(kept), self.sigma.take(kept), self.before_origin.take(kept), self.column.take(kept)
 
     @cached_property
     def _last_beam(self) -> int:
@@ -209,33 +214,33 @@ def cross_beams(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_
         return _no_crossings()
     fan = _fan_of(origins, directions)
     if fan is not None:  # a fan has one origin: each puff's offset and distance once, not once per pair
-        offset = puffs.centers - origins[0]
+        offset = np.subtract(puffs.centers.T, origins[0][:, None], order="C")  # (3, P): a row per axis
         beam, puff = _fan_pairs(fan, puffs, offset)
-        distance_sq = _dot_columns(offset.T, offset.T)[puff]
-        along = _dot_columns(offset.T[:, puff], fan.directions_by_axis[:, beam])
+        distance_sq = _dot_rows(offset, offset).take(puff)
+        along = _dot_rows(offset.take(puff, axis=1), fan.directions_by_axis.take(beam, axis=1))
     else:
         beam, puff = _all_pairs(len(origins), len(puffs))
-        offset = puffs.centers[puff] - origins[beam]
-        distance_sq = _dot_columns(offset.T, offset.T)
-        along = _dot_columns(offset.T, directions[beam].T)
+        offset = (puffs.centers.take(puff, axis=0) - origins.take(beam, axis=0)).T
+        distance_sq = _dot_rows(offset, offset)
+        along = _dot_rows(offset, directions.take(beam, axis=0).T)
     reach_of_puff = REACH_SIGMAS * puffs.sigma
-    reach = reach_of_puff[puff]
-    reach_sq = (reach_of_puff * reach_of_puff)[puff]
+    reach = reach_of_puff.take(puff)
+    reach_sq = (reach_of_puff * reach_of_puff).take(puff)
     miss_sq = np.maximum(distance_sq - along * along, 0.0)
     ahead = (along > 0) | (distance_sq < reach_sq)  # a puff behind the origin and out of reach adds < 0.2 %
-    near = ((miss_sq < reach_sq) & ahead & (along < beam_end_m[beam] + reach)).nonzero()[0]
-    beam, puff, along, miss_sq = beam[near], puff[near], along[near], miss_sq[near]
-    sigma = puffs.sigma[puff]
+    near = ((miss_sq < reach_sq) & ahead & (along < beam_end_m.take(beam) + reach)).nonzero()[0]
+    beam, puff, along, miss_sq = beam.take(near), puff.take(near), along.take(near), miss_sq.take(near)
+    sigma = puffs.sigma.take(puff)
     central_column = puffs.peak_density * _SQRT_2PI * puffs.sigma  # per puff, then per pair: the same products
-    column = central_column[puff] * np.exp(-miss_sq / (2.0 * puffs.sigma * puffs.sigma)[puff])
+    column = central_column.take(puff) * np.exp(-miss_sq / (2.0 * puffs.sigma * puffs.sigma).take(puff))
     return BeamPuffCrossings(beam, along, sigma, column, normal_cdf(-along / sigma))
 
 
 _SQRT_2PI = np.sqrt(2.0 * np.pi)
 
 
-def _dot_columns(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise dot products of (3, n) arrays, summed in einsum's order ((x + z) + y) for the same bits."""
+def _dot_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dot products of the columns of (3, n) arrays, summed in einsum's order ((x + z) + y): the same bits."""
     product = a * b
     total = product[0] + product[2]
     total += product[1]
@@ -255,14 +260,14 @@ def _all_pairs(n_beams: int, n_puffs: int) -> tuple[np.ndarray, np.ndarray]:
 @dataclass(frozen=True)
 class _Fan:
     """A fan's plane (`first`, `second` in it, `normal`) and its beams' angles in it, ascending;
-    `axes` (3, 3) holds (normal, first, second) as columns, to project offsets in one pass;
+    `axes_by_row` (3, 3, 1) holds (normal, first, second) as columns, to project (3, P) offsets in one pass;
     `directions_by_axis` (3, N) the beams' directions, one contiguous row per axis."""
 
     first: np.ndarray
     second: np.ndarray
     normal: np.ndarray
     beam_angle: np.ndarray
-    axes: np.ndarray
+    axes_by_row: np.ndarray
     directions_by_axis: np.ndarray
 
 
@@ -290,20 +295,19 @@ def _fan_geometry(origins: np.ndarray, directions: np.ndarray) -> _Fan | None:
         second, beam_angle = -second, -beam_angle
     if np.any(np.diff(beam_angle) <= 0):
         return None
-    axes = np.stack([normal, first, second], axis=1)
+    axes_by_row = np.stack([normal, first, second], axis=1)[:, :, None]
     directions_by_axis = np.ascontiguousarray(directions.T)
-    for array in (first, second, normal, beam_angle, axes, directions_by_axis):
+    for array in (first, second, normal, beam_angle, axes_by_row, directions_by_axis):
         array.flags.writeable = False  # kept and shared by later scans
-    return _Fan(first, second, normal, beam_angle, axes, directions_by_axis)
+    return _Fan(first, second, normal, beam_angle, axes_by_row, directions_by_axis)
 
 
 def _fan_pairs(fan: _Fan, puffs: Puffs, offset: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Candidate (beam, puff) pairs of a fan of beams, given each puff's `offset` from its origin:
+    """Candidate (beam, puff) pairs of a fan of beams, given each puff's `offset` (3, P) from its origin:
     the beams within each puff's angular reach, grouped by puff, ascending."""
-    beam_angle, axes = fan.beam_angle, fan.axes
-    # each column as _dot computes it: o0·a0 + o1·a1 + o2·a2
-    projected = offset[:, :1] * axes[0] + offset[:, 1:2] * axes[1] + offset[:, 2:] * axes[2]
-    height, x, y = projected.T
+    beam_angle, axes = fan.beam_angle, fan.axes_by_row
+    # each row as _dot computes it: o0·a0 + o1·a1 + o2·a2
+    height, x, y = offset[0] * axes[0] + offset[1] * axes[1] + offset[2] * axes[2]
     reach = REACH_SIGMAS * puffs.sigma
     in_plane = np.sqrt(np.maximum(reach * reach - height * height, 0.0))
     distance = np.hypot(x, y)
