@@ -21,7 +21,6 @@ beams x puffs; only (beam, puff) pairs within `REACH_SIGMAS` are kept.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import cached_property
 
 import numpy as np
 
@@ -173,7 +172,7 @@ class BeamPuffCrossings:
         end = np.full(n_beams, -np.inf)
         if len(self) == 0:
             return start, end
-        order = self.beam.argsort(kind="stable")
+        order = (self.beam.astype(np.uint16) if n_beams <= 1 << 16 else self.beam).argsort(kind="stable")  # radix sort
         beam, along, reach = self.beam.take(order), self.along_m.take(order), REACH_SIGMAS * self.sigma.take(order)
         first = np.concatenate(([0], (beam[1:] != beam[:-1]).nonzero()[0] + 1))
         start[beam.take(first)] = np.minimum.reduceat(np.maximum(along - reach, 0.0), first)
@@ -186,17 +185,13 @@ class BeamPuffCrossings:
 
     def _in_rows(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The pairs whose beam is in `rows`, their beam given as its position in `rows`."""
-        position = np.full(max(self._last_beam, int(rows.max(initial=-1))) + 1, -1)
+        position = np.full(max(int(self.beam.max()), int(rows.max())) + 1, -1)
         position[rows] = np.arange(len(rows))
         position = position.take(self.beam)
         kept = (position >= 0).nonzero()[0]
         if len(kept) == len(position):
             return position, self.along_m, self.sigma, self.before_origin, self.column
         return position.take(kept), self.along_m.take(kept), self.sigma.take(kept), self.before_origin.take(kept), self.column.take(kept)
-
-    @cached_property
-    def _last_beam(self) -> int:
-        return int(self.beam.max())
 
 
 def cross_beams(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray) -> BeamPuffCrossings:
@@ -209,17 +204,19 @@ def cross_beams(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_
     """
     if len(puffs) == 0 or len(origins) == 0:
         return _no_crossings()
-    puffs = _near_segments(puffs, origins, directions, beam_end_m)
-    if len(puffs) == 0:
+    far = _far_from_segments(puffs, origins, directions, beam_end_m)
+    if far.all():
         return _no_crossings()
     fan = _fan_of(origins, directions)
     if fan is not None:  # a fan has one origin: each puff's offset and distance once, not once per pair
         offset = np.subtract(puffs.centers.T, origins[0][:, None], order="C")  # (3, P): a row per axis
-        beam, puff = _fan_pairs(fan, puffs, offset)
+        beam, puff = _fan_pairs(fan, puffs, offset, far)
         distance_sq = _dot_rows(offset, offset).take(puff)
         along = _dot_rows(offset.take(puff, axis=1), fan.directions_by_axis.take(beam, axis=1))
     else:
-        beam, puff = _all_pairs(len(origins), len(puffs))
+        near = (~far).nonzero()[0]
+        beam, puff = _all_pairs(len(origins), len(near))
+        puff = near.take(puff)
         offset = (puffs.centers.take(puff, axis=0) - origins.take(beam, axis=0)).T
         distance_sq = _dot_rows(offset, offset)
         along = _dot_rows(offset, directions.take(beam, axis=0).T)
@@ -302,20 +299,20 @@ def _fan_geometry(origins: np.ndarray, directions: np.ndarray) -> _Fan | None:
     return _Fan(first, second, normal, beam_angle, axes_by_row, directions_by_axis)
 
 
-def _fan_pairs(fan: _Fan, puffs: Puffs, offset: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _fan_pairs(fan: _Fan, puffs: Puffs, offset: np.ndarray, far: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Candidate (beam, puff) pairs of a fan of beams, given each puff's `offset` (3, P) from its origin:
-    the beams within each puff's angular reach, grouped by puff, ascending."""
+    the beams within each puff's angular reach, grouped by puff, ascending; none for `far` puffs."""
     beam_angle, axes = fan.beam_angle, fan.axes_by_row
     # each row as _dot computes it: o0·a0 + o1·a1 + o2·a2
     height, x, y = offset[0] * axes[0] + offset[1] * axes[1] + offset[2] * axes[2]
     reach = REACH_SIGMAS * puffs.sigma
     in_plane = np.sqrt(np.maximum(reach * reach - height * height, 0.0))
     distance = np.hypot(x, y)
-    around_origin = distance <= in_plane
-    with np.errstate(divide="ignore", invalid="ignore"):
-        half_width = np.where(around_origin, np.pi, np.arcsin(np.minimum(np.maximum(in_plane / distance, 0.0), 1.0)))
+    around_origin = distance <= in_plane  # every beam's angle: set below, whatever half_width says
+    half_width = np.arcsin(np.minimum(in_plane, distance) / np.maximum(distance, _TINIEST))  # never 0 / 0
     centre = np.arctan2(y, x)
-    out_of_plane = np.abs(height) >= reach
+    skipped = np.abs(height) >= reach
+    skipped |= far
     wraps = bool((np.abs(centre) + half_width).max() >= np.pi)  # fl(c - w) = -fl(-c + w): the same test
     beams, puff_of = [], []
     for turn in (-2.0 * np.pi, 0.0, 2.0 * np.pi) if wraps else (0.0,):  # an interval may wrap around ±pi
@@ -325,13 +322,16 @@ def _fan_pairs(fan: _Fan, puffs: Puffs, offset: np.ndarray) -> tuple[np.ndarray,
             high[around_origin] = low[around_origin]
         else:
             low[around_origin], high[around_origin] = 0, len(beam_angle)
-        high[out_of_plane] = low[out_of_plane]
         counts = high - low
-        puff_of.append(np.arange(len(puffs)).repeat(counts))
+        counts[skipped] = 0
+        puff_of.append(np.arange(len(counts)).repeat(counts))
         beams.append((low + counts - counts.cumsum()).repeat(counts) + np.arange(len(puff_of[-1])))
     if len(beams) == 1:
         return beams[0], puff_of[0]
     return np.concatenate(beams), np.concatenate(puff_of)
+
+
+_TINIEST = np.nextafter(0.0, 1.0)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -344,12 +344,11 @@ def _dot(vectors: np.ndarray, axis: np.ndarray) -> np.ndarray:
     return vectors[:, 0] * axis[0] + vectors[:, 1] * axis[1] + vectors[:, 2] * axis[2]
 
 
-def _near_segments(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray) -> Puffs:
-    """The puffs within reach of the box bounding all beam segments (a cheap first cut)."""
+def _far_from_segments(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray) -> np.ndarray:
+    """Which puffs are out of reach of the box bounding all beam segments (a cheap first cut)."""
     lower, upper = _BOXES.get((origins, directions, beam_end_m), None, lambda: _segments_box(origins, directions, beam_end_m))
     reach = REACH_SIGMAS * puffs.sigma[:, None]
-    keep = ((puffs.centers + reach >= lower) & (puffs.centers - reach <= upper)).all(axis=1)
-    return Puffs(puffs.centers[keep], puffs.sigma[keep], puffs.peak_density[keep])
+    return ((puffs.centers + reach < lower) | (puffs.centers - reach > upper)).any(axis=1)
 
 
 _BOXES = KeptPerArrays()
