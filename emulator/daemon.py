@@ -28,7 +28,7 @@ from emulator.optics import World
 from emulator.scene.model import Scene, SensorSpec
 from emulator.sensors import create_sensor
 from emulator.sensors.scan import Scan
-from emulator.transport import Address, PtyAddress, TcpAddress, parse_endpoint
+from emulator.transport import Address, EndpointClaims, PtyAddress, parse_endpoint
 from emulator.transport.pty import PtyEndpoint
 from emulator.transport.tcp import TcpEndpoint
 from emulator.transport.timer import PreciseTimer
@@ -214,25 +214,16 @@ def _plan(
         if name not in known:
             raise UserError(f"--endpoint: no sensor named {name!r} (known: {', '.join(sorted(known)) or 'none'})")
     plan = []
-    owners: dict[Address, str] = {}
+    claims = EndpointClaims()
     for spec in scene.sensors:
         addresses = tuple(parse_endpoint(uri) for uri in overrides.get(spec.name, spec.endpoints))
         for address in addresses:
-            identity = _identity(address)
-            if identity in owners:
-                raise UserError(f"endpoint {address} given twice (sensors {owners[identity]!r} and {spec.name!r})")
-            if not (isinstance(address, TcpAddress) and address.port == 0):  # 0: a fresh port each
-                owners[identity] = spec.name
+            clash = claims.claim(address, spec.name)
+            if clash is not None:
+                raise UserError(f"endpoint {address} given twice (sensors {clash[1]!r} and {spec.name!r})")
         if addresses:
             plan.append((spec, addresses))
     return plan
-
-
-def _identity(address: Address) -> Address:
-    """Two spellings of one pty path are the same endpoint."""
-    if isinstance(address, PtyAddress):
-        return PtyAddress(os.path.abspath(address.path))
-    return address
 
 
 class Daemon:
