@@ -1,0 +1,89 @@
+"""Beam-puff crossings of a fan against brute force, where the fan's shortcuts are delicate:
+a full circle of beams (angular intervals wrapping around ±pi), puffs around the origin,
+above or below the plane, behind it and past the beams' ends; and the per-beam reductions."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from emulator.optics.puffs import REACH_SIGMAS, BeamPuffCrossings, Puffs, cross_beams
+from emulator.scene.plumes import Particles
+
+COUNT = 400
+
+
+def _full_circle_fan(count: int = 720) -> tuple[np.ndarray, np.ndarray]:
+    angles = np.linspace(-np.pi, np.pi, count, endpoint=False) + 1e-3
+    directions = np.stack([np.cos(angles), np.sin(angles), np.zeros_like(angles)], axis=1)
+    return np.tile([0.5, -0.2, 0.4], (count, 1)), directions
+
+
+@pytest.fixture(scope="module")
+def puffs() -> Puffs:
+    rng = np.random.default_rng(11)
+    centres = rng.uniform([-6.0, -6.0, -0.4], [6.0, 6.0, 1.2], (COUNT, 3))
+    centres[:20] = [0.5, -0.2, 0.4] + rng.uniform(-0.3, 0.3, (20, 3))  # around the origin
+    centres[20:40, 0] = rng.uniform(-6.0, -3.0, 20)  # behind the middle beam, where the fan's angles wrap
+    centres[20:40, 1] = -0.2 + rng.uniform(-0.2, 0.2, 20)
+    particles = Particles(centres, rng.uniform(0.1, 0.6, COUNT), rng.uniform(0.01, 0.1, COUNT), np.arange(COUNT))
+    return Puffs.from_particles(particles)
+
+
+def _sorted(crossings: BeamPuffCrossings) -> tuple[np.ndarray, np.ndarray]:
+    order = np.lexsort((crossings.along_m, crossings.beam))
+    fields = (crossings.along_m, crossings.sigma, crossings.column, crossings.before_origin)
+    return crossings.beam[order], np.stack([field[order] for field in fields])
+
+
+def _fan_and_brute(puffs: Puffs, end: np.ndarray) -> tuple[BeamPuffCrossings, BeamPuffCrossings]:
+    origins, directions = _full_circle_fan(len(end))
+    jittered = origins.copy()
+    jittered[0, 0] += 1e-12  # no longer one origin: the brute-force path over every beam x puff
+    return cross_beams(puffs, origins, directions, end), cross_beams(puffs, jittered, directions, end)
+
+
+def test_a_full_circle_fan_finds_the_same_pairs_as_brute_force(puffs):
+    end = np.random.default_rng(5).uniform(0.5, 5.0, 720)  # ends short of many puffs
+    fan, brute = _fan_and_brute(puffs, end)
+    fan_beam, fan_fields = _sorted(fan)
+    brute_beam, brute_fields = _sorted(brute)
+    assert len(fan) > 2000
+    assert len(np.unique(fan.beam)) > 600  # beams on every side, across the wrap at ±pi
+    np.testing.assert_array_equal(fan_beam, brute_beam)
+    np.testing.assert_allclose(fan_fields, brute_fields, rtol=1e-9, atol=1e-12)
+
+
+def test_puffs_far_from_every_beam_cross_nothing():
+    particles = Particles(np.array([[0.0, 0.0, 5.0], [40.0, 0.0, 0.4]]), np.array([0.2, 0.2]), np.array([0.05, 0.05]), np.arange(2))
+    origins, directions = _full_circle_fan()
+    assert len(cross_beams(Puffs.from_particles(particles), origins, directions, np.full(720, 10.0))) == 0
+
+
+def test_extent_spans_every_crossing_puffs_reach_and_nothing_else(puffs):
+    some = Puffs(puffs.centers[20:80], puffs.sigma[20:80], puffs.peak_density[20:80])  # none around the origin
+    crossings, _ = _fan_and_brute(some, np.full(720, 4.0))
+    start, end = crossings.extent_m(720)
+    for beam in np.unique(crossings.beam)[[0, 1, 7, 50, -2, -1]]:
+        mine = crossings.beam == beam
+        reach = REACH_SIGMAS * crossings.sigma[mine]
+        assert mine.any()
+        assert start[beam] == np.maximum(crossings.along_m[mine] - reach, 0.0).min()
+        assert end[beam] == (crossings.along_m[mine] + reach).max()
+    without = np.setdiff1d(np.arange(720), crossings.beam)
+    assert len(without) > 0
+    assert np.all(start[without] == np.inf) and np.all(end[without] == -np.inf)
+
+
+def test_optical_path_to_some_rows_and_unbounded_limits(puffs):
+    crossings, _ = _fan_and_brute(puffs, np.full(720, 6.0))
+    limits = np.random.default_rng(2).uniform(0.0, 6.0, (720, 3))
+    limits[::7, 1] = np.inf
+    limits[::11, 2] = np.nan  # no limit: the whole way, as inf
+    whole = crossings.optical_path_to(limits)
+    rows = np.array([719, 3, 360, 1, 500])  # in any order
+    np.testing.assert_array_equal(crossings.optical_path_to(limits[rows], rows), whole[rows])
+    np.testing.assert_array_equal(whole[::11, 2], crossings.optical_path_to(np.full(720, np.inf))[::11])
+    single = crossings.optical_path_to(limits[:, 0])
+    assert single.shape == (720,)
+    np.testing.assert_array_equal(single, whole[:, 0])
