@@ -42,8 +42,9 @@ def _reference_spreading(reference_range_m: float, overlap_m: float, gain_ramp_m
     return float(_spreading(reference_range_m, overlap_m, gain_ramp_m))
 
 
+@functools.lru_cache(maxsize=64)
 def log_threshold(receiver: ReceiverOptics, params: PhysicalParams, extinction_per_density: float) -> float:
-    """ln of the weakest detectable echo.
+    """ln of the weakest detectable echo (the same for every scan, so computed once).
 
     "reference": the reference target seen through exactly the penetration
     power, exp(-2 k P) — derived from the paper, not tuned. A (reflectivity,
