@@ -47,6 +47,7 @@ _CDF_STEP = 1e-3
 _CDF_TABLE = 0.5 * (1.0 + erf(np.arange(-_CDF_LIMIT, _CDF_LIMIT + 2 * _CDF_STEP, _CDF_STEP) / np.sqrt(2.0)))
 _CDF_SLOPE = np.diff(_CDF_TABLE)
 _CDF_LAST = len(_CDF_SLOPE) - 1e-9
+_CDF_ROWS = np.stack([_CDF_SLOPE, _CDF_TABLE[:-1]], axis=1)  # one cache line serves both: random reads halve
 
 
 def normal_cdf(x: np.ndarray) -> np.ndarray:
@@ -61,8 +62,9 @@ def normal_cdf(x: np.ndarray) -> np.ndarray:
     np.minimum(position, _CDF_LAST, out=position)
     index = position.astype(np.intp)
     position -= index
-    position *= _CDF_SLOPE.take(index)
-    position += _CDF_TABLE.take(index)
+    row = _CDF_ROWS.take(index, axis=0)
+    position *= row[..., 0]
+    position += row[..., 1]
     return position
 
 
@@ -165,18 +167,12 @@ class BeamPuffCrossings:
         return np.ascontiguousarray(result.T)
 
     def extent_m(self, n_beams: int) -> tuple[np.ndarray, np.ndarray]:
-        """Per beam, where puff smoke starts and ends (REACH_SIGMAS around the centres; inf/−inf if none).
-
-        Pairs sorted by beam reduce per beam with reduceat (ufunc.at is slow)."""
+        """Per beam, where puff smoke starts and ends (REACH_SIGMAS around the centres; inf/−inf if none)."""
         start = np.full(n_beams, np.inf)
         end = np.full(n_beams, -np.inf)
-        if len(self) == 0:
-            return start, end
-        order = (self.beam.astype(np.uint16) if n_beams <= 1 << 16 else self.beam).argsort(kind="stable")  # radix sort
-        beam, along, reach = self.beam.take(order), self.along_m.take(order), REACH_SIGMAS * self.sigma.take(order)
-        first = np.concatenate(([0], (beam[1:] != beam[:-1]).nonzero()[0] + 1))
-        start[beam.take(first)] = np.minimum.reduceat(np.maximum(along - reach, 0.0), first)
-        end[beam.take(first)] = np.maximum.reduceat(along + reach, first)
+        reach = REACH_SIGMAS * self.sigma
+        np.minimum.at(start, self.beam, np.maximum(self.along_m - reach, 0.0))
+        np.maximum.at(end, self.beam, self.along_m + reach)
         return start, end
 
     @property
