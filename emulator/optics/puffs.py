@@ -200,10 +200,11 @@ def cross_beams(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_
     """
     if len(puffs) == 0 or len(origins) == 0:
         return _no_crossings()
-    far = _far_from_segments(puffs, origins, directions, beam_end_m)
+    segments = _segments_of(origins, directions, beam_end_m)
+    far = _far_from(segments, puffs)
     if far.all():
         return _no_crossings()
-    fan = _fan_of(origins, directions)
+    fan = segments.fan
     if fan is not None:  # a fan has one origin: each puff's offset and distance once, not once per pair
         offset = np.subtract(puffs.centers.T, origins[0][:, None], order="C")  # (3, P): a row per axis
         beam, puff = _fan_pairs(fan, puffs, offset, far)
@@ -218,11 +219,15 @@ def cross_beams(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_
         along = _dot_rows(offset, directions.take(beam, axis=0).T)
     reach_of_puff = REACH_SIGMAS * puffs.sigma
     reach = reach_of_puff.take(puff)
-    reach_sq = (reach_of_puff * reach_of_puff).take(puff)
+    before_end = (along < beam_end_m.take(beam) + reach).nonzero()[0]  # the test that culls: first, on every candidate
+    beam, puff, along, distance_sq, reach = beam.take(before_end), puff.take(before_end), along.take(before_end), distance_sq.take(before_end), reach.take(before_end)
+    reach_sq = reach * reach
     miss_sq = np.maximum(distance_sq - along * along, 0.0)
     ahead = (along > 0) | (distance_sq < reach_sq)  # a puff behind the origin and out of reach adds < 0.2 %
-    near = ((miss_sq < reach_sq) & ahead & (along < beam_end_m.take(beam) + reach)).nonzero()[0]
-    beam, puff, along, miss_sq = beam.take(near), puff.take(near), along.take(near), miss_sq.take(near)
+    near = (miss_sq < reach_sq) & ahead  # a fan's angular reach nearly implies both: rarely a cull
+    if not near.all():
+        near = near.nonzero()[0]
+        beam, puff, along, miss_sq = beam.take(near), puff.take(near), along.take(near), miss_sq.take(near)
     sigma = puffs.sigma.take(puff)
     central_column = puffs.peak_density * _SQRT_2PI * puffs.sigma  # per puff, then per pair: the same products
     column = central_column.take(puff) * np.exp(-miss_sq / (2.0 * puffs.sigma * puffs.sigma).take(puff))
@@ -309,11 +314,13 @@ def _fan_pairs(fan: _Fan, puffs: Puffs, offset: np.ndarray, far: np.ndarray) -> 
     centre = np.arctan2(y, x)
     skipped = np.abs(height) >= reach
     skipped |= far
-    wraps = bool((np.abs(centre) + half_width).max() >= np.pi)  # fl(c - w) = -fl(-c + w): the same test
+    lower_edge, upper_edge = centre - half_width, centre + half_width
+    # an interval reaching past ±pi may hold beams one turn away (checked with a margin: a needless turn adds no pairs)
+    wraps = upper_edge.max() > beam_angle[0] + (2.0 * np.pi - 1e-9) or lower_edge.min() < beam_angle[-1] - (2.0 * np.pi - 1e-9)
     beams, puff_of = [], []
-    for turn in (-2.0 * np.pi, 0.0, 2.0 * np.pi) if wraps else (0.0,):  # an interval may wrap around ±pi
-        low = beam_angle.searchsorted(centre + turn - half_width, side="left")
-        high = beam_angle.searchsorted(centre + turn + half_width, side="right")
+    for turn in (-2.0 * np.pi, 0.0, 2.0 * np.pi) if wraps else (0.0,):
+        low = beam_angle.searchsorted(centre + turn - half_width if turn else lower_edge, side="left")
+        high = beam_angle.searchsorted(centre + turn + half_width if turn else upper_edge, side="right")
         if turn:
             high[around_origin] = low[around_origin]
         else:
@@ -340,14 +347,27 @@ def _dot(vectors: np.ndarray, axis: np.ndarray) -> np.ndarray:
     return vectors[:, 0] * axis[0] + vectors[:, 1] * axis[1] + vectors[:, 2] * axis[2]
 
 
-def _far_from_segments(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray) -> np.ndarray:
+@dataclass(frozen=True)
+class _Segments:
+    """What crossing puffs needs of fixed beam segments: the corners of the box bounding them, and their fan if any."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+    fan: _Fan | None
+
+
+_SEGMENTS = KeptPerArrays()
+
+
+def _segments_of(origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray) -> _Segments:
+    """Kept for a sensor's read-only beam arrays: one look-up a scan."""
+    return _SEGMENTS.get((origins, directions, beam_end_m), None, lambda: _Segments(*_segments_box(origins, directions, beam_end_m), _fan_of(origins, directions)))
+
+
+def _far_from(segments: _Segments, puffs: Puffs) -> np.ndarray:
     """Which puffs are out of reach of the box bounding all beam segments (a cheap first cut)."""
-    lower, upper = _BOXES.get((origins, directions, beam_end_m), None, lambda: _segments_box(origins, directions, beam_end_m))
     reach = REACH_SIGMAS * puffs.sigma[:, None]
-    return ((puffs.centers + reach < lower) | (puffs.centers - reach > upper)).any(axis=1)
-
-
-_BOXES = KeptPerArrays()
+    return np.logical_or.reduce((puffs.centers + reach < segments.lower) | (puffs.centers - reach > segments.upper), axis=1)
 
 
 def _segments_box(origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
