@@ -151,8 +151,9 @@ class BeamPuffCrossings:
         head = np.bincount(beam, weights=column * (_CDF_HEAD - before), minlength=count)
         result = np.bincount(past * count + beam, weights=column * (_CDF_TAIL - _CDF_HEAD), minlength=(width + 1) * count)
         result = result[:-count].reshape(width, count)
-        for point in range(1, width):  # a running sum over the F rows (np.cumsum on short columns is slower)
-            result[point] += result[point - 1]
+        grid_rows = list(result)  # views: a running sum over the F rows, in place (np.cumsum on short columns is slower)
+        for previous, current in zip(grid_rows, grid_rows[1:]):
+            current += previous
         result += head
         inside = past - first
         ends = inside.cumsum()
@@ -184,9 +185,9 @@ class BeamPuffCrossings:
         position = np.full(max(int(self.beam.max()), int(rows.max())) + 1, -1)
         position[rows] = np.arange(len(rows))
         position = position.take(self.beam)
-        kept = (position >= 0).nonzero()[0]
-        if len(kept) == len(position):
+        if position.min() >= 0:
             return position, self.along_m, self.sigma, self.before_origin, self.column
+        kept = (position >= 0).nonzero()[0]
         return position.take(kept), self.along_m.take(kept), self.sigma.take(kept), self.before_origin.take(kept), self.column.take(kept)
 
 
@@ -224,7 +225,7 @@ def cross_beams(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_
     reach_sq = reach * reach
     miss_sq = np.maximum(distance_sq - along * along, 0.0)
     ahead = (along > 0) | (distance_sq < reach_sq)  # a puff behind the origin and out of reach adds < 0.2 %
-    near = (miss_sq < reach_sq) & ahead  # a fan's angular reach nearly implies both: rarely a cull
+    near = (miss_sq < reach_sq) & ahead  # a fan's angular reach nearly implies both; all pairs need them
     if not near.all():
         near = near.nonzero()[0]
         beam, puff, along, miss_sq = beam.take(near), puff.take(near), along.take(near), miss_sq.take(near)
