@@ -153,15 +153,15 @@ def urg_decision(
 def _crossing_on_grid(energy: np.ndarray, edges_m: np.ndarray, level: float) -> np.ndarray:
     """First distance where an energy (N, M+1) given at bin edges, linear in between, reaches `level` (inf if never)."""
     reached = energy >= level
-    index = np.argmax(reached, axis=1)
-    rows = np.arange(len(energy))
-    any_reached = reached[rows, index]  # argmax finds the first True, or 0 when there is none
-    previous = np.maximum(index - 1, 0)
-    low, high = energy[rows, previous], energy[rows, index]
+    first = np.argmax(reached, axis=1)  # the first True, or 0 when there is none
+    index = first + np.arange(0, energy.size, energy.shape[1])  # row-major flat positions (1-D take beats 2-D indexing)
+    previous = np.where(first > 0, index - 1, index)
+    low, high = energy.take(previous), energy.take(index)
     with np.errstate(divide="ignore", invalid="ignore"):
         fraction = np.fmin(np.fmax((level - low) / (high - low), 0.0), 1.0)  # fmax: NaN (high == low, only at index 0) → 0
-    at = edges_m[rows, previous] + fraction * (edges_m[rows, index] - edges_m[rows, previous])
-    return np.where(any_reached, at, np.inf)
+    below = edges_m.take(previous)
+    below += fraction * (edges_m.take(index) - below)
+    return np.where(reached.take(index), below, np.inf)
 
 
 @dataclass(frozen=True)
@@ -219,16 +219,15 @@ def _edge_lookup(edges_m: np.ndarray, fractions: np.ndarray | None) -> _EdgeLook
 
 
 def _by_range(amp: np.ndarray, range_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each row's targets (N, S) nearest first, those with no echo (amp 0) last; only rows with
-    several echoing targets need sorting."""
-    if amp.shape[1] == 1:
+    """Each row's echoing targets (N, S) nearest first. Only rows with an echo past the first
+    column need sorting: in the others the later columns hold no energy, wherever they lie."""
+    several = np.flatnonzero(amp[:, 1:].any(axis=1))
+    if len(several) == 0:
         return range_m, amp
-    several = np.flatnonzero(np.count_nonzero(amp, axis=1) > 1)
-    ranges, amps = np.where(amp > 0, range_m, np.inf), amp.copy()
-    if len(several):
-        order = np.argsort(ranges[several], axis=1)
-        order += (several * amp.shape[1])[:, None]  # row-major flat positions
-        ranges[several], amps[several] = range_m.ravel().take(order), amp.ravel().take(order)
+    ranges, amps = range_m.copy(), amp.copy()
+    order = np.argsort(np.where(amp[several] > 0, range_m[several], np.inf), axis=1)
+    order += (several * amp.shape[1])[:, None]  # row-major flat positions
+    ranges[several], amps[several] = range_m.ravel().take(order), amp.ravel().take(order)
     return ranges, amps
 
 
@@ -262,23 +261,29 @@ def lms_first_echo(
     lookup = _edge_lookup(edges_m, fractions)
     start, length = edges_m[:, 0], edges_m[:, bins] - edges_m[:, 0]
 
-    def energy_at(rows: np.ndarray, points_m: np.ndarray) -> np.ndarray:
-        """Cumulative smoke energy of `rows` at points (R, K); inf points take the whole smoke."""
-        along = points_m - start[rows, None]
-        along *= 1.0 / length[rows, None]
+    def energy_at(rows: np.ndarray, points_m: np.ndarray, starts: np.ndarray, scales: np.ndarray) -> np.ndarray:
+        """Cumulative smoke energy of `rows` at points (R, K), given each row's start and 1 / length (R, 1);
+        inf points take the whole smoke."""
+        along = points_m - starts
+        along *= scales
         np.maximum(along, 0.0, out=along)
         np.minimum(along, 1.0, out=along)
         return lookup.interpolate(cumulative, rows, along)
 
+    holding_start, holding_scale = start.take(holding)[:, None], 1.0 / length.take(holding)[:, None]
+
     def smoke_window(points_m: np.ndarray) -> np.ndarray:
         """Smoke energy of the rows `holding` within the window ending at each point (H, K)."""
-        at = energy_at(holding, np.concatenate([points_m, points_m - window], axis=1))
+        at = energy_at(holding, np.concatenate([points_m, points_m - window], axis=1), holding_start, holding_scale)
         return at[:, : points_m.shape[1]] - at[:, points_m.shape[1] :]
 
     ranges, amps = _by_range(target_amp, target_range_m)
-    beams = smoke_rows[holding]
+    targets = ranges.shape[1]
+    beams = smoke_rows.take(holding)
     energy_at_target = np.cumsum(amps, axis=1)
-    energy_at_target[beams] += smoke_window(ranges[beams])
+    # 1-D fancy indexing: far cheaper than 2-D row indexing on small arrays
+    beam_targets = (beams[:, None] * targets + np.arange(targets)).ravel()
+    energy_at_target.ravel()[beam_targets] += smoke_window(ranges.take(beams, axis=0)).ravel()
 
     smoke_at = np.full(len(ranges), np.inf)
     # only these rows' windows can reach the threshold (to within a few ulps of the window sums)
@@ -286,23 +291,29 @@ def lms_first_echo(
     if len(reachable):
         # at a bin edge the cumulative is exact; the window's far end lies before the smoke (adding 0)
         # unless the smoke is longer than the window
-        at_edges = cumulative[reachable]
-        long = np.flatnonzero(length[reachable] > window)
+        at_edges = cumulative.take(reachable, axis=0)
+        reachable_edges = edges_m.take(reachable, axis=0)
+        long = np.flatnonzero(length.take(reachable) > window)
         if len(long):
-            long_rows = reachable[long]
-            at_edges[long] -= energy_at(long_rows, edges_m[long_rows] - window)
-        smoke_at[smoke_rows[reachable]] = _crossing_on_grid(at_edges, edges_m[reachable], threshold)
+            long_rows = reachable.take(long)
+            far_ends = energy_at(
+                long_rows, reachable_edges.take(long, axis=0) - window, start.take(long_rows)[:, None], 1.0 / length.take(long_rows)[:, None]
+            )
+            long_edges = (long[:, None] * (bins + 1) + np.arange(bins + 1)).ravel()
+            at_edges.ravel()[long_edges] -= far_ends.ravel()
+        smoke_at[smoke_rows.take(reachable)] = _crossing_on_grid(at_edges, reachable_edges, threshold)
     reached = (energy_at_target >= threshold) & (amps > 0)
     first_target = np.argmax(reached, axis=1)
-    rows = np.arange(len(ranges))
-    target_at = np.where(reached[rows, first_target], ranges[rows, first_target], np.inf)
+    first_target += np.arange(0, reached.size, targets)  # row-major flat positions
+    target_at = np.where(reached.take(first_target), ranges.take(first_target), np.inf)
     from_smoke = smoke_at < target_at
     echo_m = np.minimum(smoke_at, target_at)
-    energy_at_echo = np.where(from_smoke, threshold, energy_at_target[rows, first_target])
+    energy_at_echo = np.where(from_smoke, threshold, energy_at_target.take(first_target))
     before = echo_m - receiver.max_rise_m
     targets_before = ((ranges <= before[:, None]) * amps).sum(axis=1)  # absent targets (range inf) have amp 0
     gained = energy_at_echo - targets_before
     if len(holding):
-        gained[beams] -= smoke_window(np.where(np.isfinite(before[beams]), before[beams], 0.0)[:, None])[:, 0]
+        before_smoke = before.take(beams)
+        gained[beams] -= smoke_window(np.where(np.isfinite(before_smoke), before_smoke, 0.0)[:, None])[:, 0]
     clean = gained >= receiver.sharp_fraction * threshold
     return echo_m, from_smoke, clean
