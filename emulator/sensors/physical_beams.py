@@ -115,7 +115,7 @@ def _region_path_to(hits: BeamHits, rows: np.ndarray, limits: np.ndarray) -> np.
     for region in hits.regions:
         if region.density <= 0:
             continue
-        entry, exit_ = region.entry_m[rows], region.exit_m[rows]
+        entry, exit_ = region.entry_m.take(rows, axis=0), region.exit_m.take(rows, axis=0)  # take: cheaper than 2-D indexing
         if entry.shape[1] == 1:  # one interval per beam (a convex region): no sum over intervals
             inside = np.minimum(exit_, limits)
             inside -= np.minimum(entry, limits)
@@ -159,6 +159,7 @@ class _SurfaceGeometry:
     inverse_shares: np.ndarray  # (N, 1)
     edge_region_lengths: tuple[np.ndarray, ...]  # per region, chord length (E, S) before each edge row's sub-rays
     cast_is_central: np.ndarray  # (N,) 1.0 where the first sub-ray is the cast beam itself, 0.0 on edge rows
+    edge_positions: np.ndarray  # row-major flat positions of the edge rows' sub-rays in an (N, S) array
     region_extents: tuple[tuple[np.ndarray, np.ndarray], ...]  # `_region_extents`
 
 
@@ -222,6 +223,7 @@ def _footprint_surfaces(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, 
         1.0 / shares,
         tuple(_chords_before(region, edge_rows, edge_limits) for region in hits.regions),
         cast_is_central,
+        (edge_rows[:, None] * sub_rays + np.arange(sub_rays)).ravel(),
         _region_extents(hits),
     )
     _lock(tuple(getattr(geometry, field.name) for field in dataclasses.fields(geometry)))
@@ -254,7 +256,7 @@ def _surfaces(hits: BeamHits, geometry: _SurfaceGeometry, puff_to_surfaces: np.n
         for region, chords in zip(hits.regions, geometry.edge_region_lengths):
             if region.density > 0:
                 region_path += region.density * chords
-        optical_path[edge_rows] += region_path
+        optical_path.ravel()[geometry.edge_positions] += region_path.ravel()  # 1-D: cheaper than 2-D row indexing
     optical_path *= factor[:, None]
     log_each = optical_path * (-2.0 * extinction)
     log_each += geometry.log_clear_air
@@ -335,7 +337,7 @@ def _smoke_echoes(
     edges = low[:, None] + length[:, None] * grid.fractions
     path = _region_path_to(hits, rows, edges)
     path += crossings.optical_path_on_grid(rows, low, length, grid.fractions)
-    path *= factor[rows, None]
+    path *= factor.take(rows)[:, None]
     # each bin's mean extinction over its width, length × the bin's fraction of the extent
     scattering = path[:, 1:] - path[:, :-1]
     scattering *= grid.inverse_widths * (extinction / params.multiple_scattering_extinction)
