@@ -280,10 +280,6 @@ def lms_first_echo(
     ranges, amps = _by_range(target_amp, target_range_m)
     targets = ranges.shape[1]
     beams = smoke_rows.take(holding)
-    energy_at_target = np.cumsum(amps, axis=1)
-    # 1-D fancy indexing: far cheaper than 2-D row indexing on small arrays
-    beam_targets = (beams[:, None] * targets + np.arange(targets)).ravel()
-    energy_at_target.ravel()[beam_targets] += smoke_window(ranges.take(beams, axis=0)).ravel()
 
     smoke_at = np.full(len(ranges), np.inf)
     # only these rows' windows can reach the threshold (to within a few ulps of the window sums)
@@ -302,18 +298,30 @@ def lms_first_echo(
             long_edges = (long[:, None] * (bins + 1) + np.arange(bins + 1)).ravel()
             at_edges.ravel()[long_edges] -= far_ends.ravel()
         smoke_at[smoke_rows.take(reachable)] = _crossing_on_grid(at_edges, reachable_edges, threshold)
+
+    # one interpolation for the smoky rows' windows at every surface and before every candidate echo
+    # (each surface and the smoke's own), whichever the receiver then stops at
+    energy_at_target = np.cumsum(amps, axis=1)
+    rise = receiver.max_rise_m
+    if len(holding):
+        smoke_ranges = ranges.take(beams, axis=0)
+        smoke_echo = smoke_at.take(beams)[:, None]
+        windows = smoke_window(np.concatenate([smoke_ranges, smoke_ranges - rise, np.where(np.isfinite(smoke_echo), smoke_echo - rise, 0.0)], axis=1))
+        beam_targets = (beams[:, None] * targets + np.arange(targets)).ravel()  # 1-D: cheaper than 2-D row indexing
+        energy_at_target.ravel()[beam_targets] += windows[:, :targets].ravel()
     reached = (energy_at_target >= threshold) & (amps > 0)
     first_target = np.argmax(reached, axis=1)
-    first_target += np.arange(0, reached.size, targets)  # row-major flat positions
-    target_at = np.where(reached.take(first_target), ranges.take(first_target), np.inf)
+    first_position = first_target + np.arange(0, reached.size, targets)  # row-major flat positions
+    target_at = np.where(reached.take(first_position), ranges.take(first_position), np.inf)
     from_smoke = smoke_at < target_at
     echo_m = np.minimum(smoke_at, target_at)
-    energy_at_echo = np.where(from_smoke, threshold, energy_at_target.take(first_target))
-    before = echo_m - receiver.max_rise_m
+    energy_at_echo = np.where(from_smoke, threshold, energy_at_target.take(first_position))
+    before = echo_m - rise
     targets_before = ((ranges <= before[:, None]) * amps).sum(axis=1)  # absent targets (range inf) have amp 0
     gained = energy_at_echo - targets_before
     if len(holding):
-        before_smoke = before.take(beams)
-        gained[beams] -= smoke_window(np.where(np.isfinite(before_smoke), before_smoke, 0.0)[:, None])[:, 0]
+        # the window before the echo: the smoke's own column, or that of the surface that stopped the receiver
+        candidate = np.where(from_smoke.take(beams), 2 * targets, targets + first_target.take(beams))
+        gained[beams] -= windows.take(candidate + np.arange(0, windows.size, windows.shape[1]))
     clean = gained >= receiver.sharp_fraction * threshold
     return echo_m, from_smoke, clean
