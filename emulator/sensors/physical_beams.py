@@ -149,12 +149,10 @@ class _SurfaceGeometry:
     ranges: np.ndarray
     stretch_per_path: np.ndarray  # material range stretch × 2 k: apparent range = range × (1 + this × optical path)
     shares: np.ndarray  # (N, 1): sub-rays used per beam, which share its echo power
-    used: np.ndarray
     edge_rows: np.ndarray
     present: np.ndarray  # used, with a surface in reach
-    limits: np.ndarray  # range of each present surface, 0 elsewhere (an unused sub-ray's limit 0 adds exactly 0)
     any_present: np.ndarray  # (N,)
-    end_and_surfaces_m: np.ndarray  # (N, 1 + S): each beam's end and its sub-rays' limits
+    end_and_surfaces_m: np.ndarray  # (N, 1 + S): each beam's end and each present surface's range (0 elsewhere: adds exactly 0)
     log_clear_air: np.ndarray  # ln of each sub-ray's echo without smoke; -inf where it cannot echo at all
     inverse_shares: np.ndarray  # (N, 1)
     edge_region_lengths: tuple[np.ndarray, ...]  # per region, chord length (E, S) before each edge row's sub-rays
@@ -213,10 +211,8 @@ def _footprint_surfaces(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, 
         ranges,
         stretch * 2.0 * beams.scene.density_to_extinction,
         shares,
-        used,
         edge_rows,
         present,
-        limits,
         present.any(axis=1),
         np.concatenate([hits.beam_end_m[:, None], limits], axis=1),
         np.where(can_echo, log_clear_air_echo(reflectivity, cos_factor, ranges, receiver, params), -np.inf),
