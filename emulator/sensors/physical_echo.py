@@ -241,7 +241,7 @@ def lms_first_echo(
     smoke_rows: np.ndarray | None = None,
     fractions: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The pulsed receiver: (range_m, from_smoke, clean) per beam; range inf = no echo.
+    """The pulsed receiver: (range_m, from_smoke, clean) per beam; range inf = no echo (and `clean` then means nothing).
 
     The receiver integrates the echo energy over the last `window_m` of range
     (smoke bins, and the surfaces met so far) and stops at the first distance
