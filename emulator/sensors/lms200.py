@@ -9,15 +9,15 @@ echo within the sensor's physical reach (80 m) (telegram listing §10.8).
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 from emulator.optics import PreparedBeams, World
 from emulator.scene.model import Scene, SensorSpec
 from emulator.sensors.beam_geometry import scan_plane_rays
-from emulator.sensors.response import Beams, response_model
-from emulator.sensors.scan import Scan
+from emulator.sensors.response import Beams, response_model, values_at_instants
+from emulator.sensors.scan import Scan, simulated_instant
 
 MODEL = "lms200"
 PERIOD_S = 1.0 / 75.0  # one mirror revolution
@@ -72,13 +72,27 @@ class LmsSensor:
         self, time_s: float, *, start_deg: float = 0.0, step_deg: float = 0.5, count: int = 361, unit: str = "mm"
     ) -> Scan:
         """Values at device angles start_deg + i·step_deg (i < count), in `unit`, at `time_s`."""
+        return self.scans((time_s,), start_deg=start_deg, step_deg=step_deg, count=count, unit=unit)[0]
+
+    def scans(
+        self,
+        times_s: Sequence[float],
+        *,
+        start_deg: float = 0.0,
+        step_deg: float = 0.5,
+        count: int = 361,
+        unit: str = "mm",
+    ) -> list[Scan]:
+        """`scan` of one window at each of `times_s`, computed together: a preset that can
+        (`physical`) shares each pass among them, which costs far less per scan."""
         if unit not in UNITS_PER_M:
             raise ValueError(f"unit must be one of {sorted(UNITS_PER_M)}, got {unit!r}")
         angles_rad, prepared = self._beams(start_deg, step_deg, count)
-        hits = self.world.cast_prepared(prepared, time_s)
-        beams = Beams(self.scene, self.spec, self.world, time_s, angles_rad, prepared.origins, prepared.directions)
-        values = np.asarray(self._response.lms_values(hits, beams, unit), dtype=np.int64)
-        return Scan(self.name, MODEL, time_s, angles_rad, values, unit)
+        instants = [simulated_instant(t) for t in times_s]
+        hits = [self.world.cast_prepared(prepared, t) for t in instants]
+        beams = [Beams(self.scene, self.spec, self.world, t, angles_rad, prepared.origins, prepared.directions) for t in instants]
+        values = values_at_instants(self._response, "lms_values", hits, beams, unit).astype(np.int64, copy=False)
+        return [Scan(self.name, MODEL, t, angles_rad, row, unit) for t, row in zip(times_s, values)]
 
     def configured_scan(self, time_s: float) -> Scan:
         """The scan the scene's options select (`configured_window`), at `time_s`."""

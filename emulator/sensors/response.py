@@ -6,6 +6,10 @@ A preset is a module `emulator.sensors.<preset>` defining
     lms_values(hits: BeamHits, beams: Beams, unit: str) -> np.ndarray   # int values (unit or 8183..8191)
 
 so a new preset needs no registration: naming it in the scene selects it.
+A preset may also define `urg_values_at` / `lms_values_at(hits, beams, ...)`
+taking lists (one entry per instant) and returning (K, N) values: several
+instants in one pass, each row equal to the single-instant call
+(`values_at_instants` falls back to one call per instant).
 `Beams` gives a model everything beyond the hits (scene, sensor, world to
 cast more rays, the beams' geometry and time).
 """
@@ -15,11 +19,12 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass
 from types import ModuleType
+from typing import Any, Sequence
 
 import numpy as np
 
 from emulator.errors import UserError
-from emulator.optics import World
+from emulator.optics import BeamHits, World
 from emulator.scene.model import Scene, SensorSpec
 
 PRESET_MODULES = {"formsma2011": "emulator.sensors.formsma2011", "physical": "emulator.sensors.physical"}
@@ -48,3 +53,15 @@ def response_model(preset: str) -> ModuleType:
         if error.name != PRESET_MODULES[preset]:
             raise
         raise UserError(f"smoke model {preset!r} is not available in this version") from error
+
+
+def values_at_instants(
+    model: ModuleType, name: str, hits: Sequence[BeamHits], beams: Sequence[Beams], *args: Any
+) -> np.ndarray:
+    """`model.<name>` (`urg_values` or `lms_values`) at several instants, (K, N): in one pass where
+    the preset offers `<name>_at`, else one instant after another."""
+    batched = getattr(model, f"{name}_at", None)
+    if batched is not None:
+        return np.asarray(batched(hits, beams, *args))
+    single = getattr(model, name)
+    return np.stack([np.asarray(single(h, b, *args)) for h, b in zip(hits, beams)])

@@ -6,6 +6,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
+TICKS_PER_S = 1_000_000
+
+
+def simulated_instant(time_s: float) -> float:
+    """The instant the world is evaluated at for a scan at `time_s`: whole microseconds.
+
+    Times a device computes one way (scan index × period) and a scan cache
+    another (last time + stride) differ in their last bits; on the µs grid they
+    give the same, bit-identical scan. Decimal times with up to six places are
+    unchanged.
+    """
+    return round(time_s * TICKS_PER_S) / TICKS_PER_S
+
 
 @dataclass(frozen=True)
 class Scan:

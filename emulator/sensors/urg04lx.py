@@ -10,13 +10,15 @@ than DMIN = 20 mm).
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import numpy as np
 
 from emulator.optics import World
 from emulator.scene.model import Scene, SensorSpec
 from emulator.sensors.beam_geometry import scan_plane_rays
-from emulator.sensors.response import Beams, response_model
-from emulator.sensors.scan import Scan
+from emulator.sensors.response import Beams, response_model, values_at_instants
+from emulator.sensors.scan import Scan, simulated_instant
 
 MODEL = "urg-04lx"
 STEPS = 769
@@ -58,11 +60,17 @@ class UrgSensor:
 
     def scan(self, time_s: float) -> Scan:
         """The scan completed at simulated time `time_s` (the world evaluated at that instant)."""
-        hits = self.world.cast_prepared(self._prepared, time_s)
-        beams = Beams(self.scene, self.spec, self.world, time_s, self._valid_angles, self._origins, self._directions)
-        values = np.full(STEPS, OUTSIDE_VALID_AREA, dtype=np.int64)
-        values[self._valid] = self._response.urg_values(hits, beams)
-        return Scan(self.name, MODEL, time_s, self.angles_rad, values, "mm")
+        return self.scans((time_s,))[0]
+
+    def scans(self, times_s: Sequence[float]) -> list[Scan]:
+        """`scan` at each of `times_s`, computed together: a preset that can (`physical`)
+        shares each pass among them, which costs far less per scan."""
+        instants = [simulated_instant(t) for t in times_s]
+        hits = [self.world.cast_prepared(self._prepared, t) for t in instants]
+        beams = [Beams(self.scene, self.spec, self.world, t, self._valid_angles, self._origins, self._directions) for t in instants]
+        values = np.full((len(instants), STEPS), OUTSIDE_VALID_AREA, dtype=np.int64)
+        values[:, self._valid] = values_at_instants(self._response, "urg_values", hits, beams)
+        return [Scan(self.name, MODEL, t, self.angles_rad, row, "mm") for t, row in zip(times_s, values)]
 
     def configured_scan(self, time_s: float) -> Scan:
         """The same as `scan`: the URG-04LX has one scan (its window is chosen by the protocol)."""
