@@ -12,6 +12,8 @@ last scan, so a driver that stays connected keeps receiving scans.
 
 from __future__ import annotations
 
+from typing import Sequence
+
 import numpy as np
 
 from emulator.errors import UserError
@@ -72,6 +74,10 @@ class UrgReplay:
         values = self._values[self._clock.row_at(time_s)]
         return Scan(self.name, self.model, time_s, self._angles, values.copy(), "mm")
 
+    def scans(self, times_s: Sequence[float]) -> list[Scan]:
+        """`scan` at each of `times_s` (a table look-up each: nothing to share)."""
+        return [self.scan(time_s) for time_s in times_s]
+
 
 class LmsReplay:
     """An LMS200 serving a log's scans for any requested window of device angles.
@@ -110,6 +116,13 @@ class LmsReplay:
         recorded = _convert_unit(self._values[self._clock.row_at(time_s)][nearest], self._unit, unit)
         values = np.where(found, recorded, LMS_NO_ECHO)
         return Scan(self.name, self.model, time_s, wanted, values, unit)
+
+    def scans(
+        self, times_s: Sequence[float], *, start_deg: float = 0.0, step_deg: float = 0.5,
+        count: int = 361, unit: str = "mm",
+    ) -> list[Scan]:
+        """`scan` of one window at each of `times_s` (a table look-up each: nothing to share)."""
+        return [self.scan(t, start_deg=start_deg, step_deg=step_deg, count=count, unit=unit) for t in times_s]
 
 
 def _convert_unit(values: np.ndarray, from_unit: str, to_unit: str) -> np.ndarray:

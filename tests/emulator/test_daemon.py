@@ -47,6 +47,9 @@ class RecordedSensor:
         values = 1000 + np.arange(769) + index
         return Scan("urg", "urg-04lx", time_s, np.zeros(769), values)
 
+    def scans(self, times_s: list[float]) -> list[Scan]:
+        return [self.scan(time_s) for time_s in times_s]
+
 
 class Running:
     """A daemon on a loop thread; `ready` holds its ready endpoints."""

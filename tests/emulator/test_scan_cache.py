@@ -1,0 +1,136 @@
+"""The daemon's ScanCache with a real sensor (railway's LMS200, `physical`): a steady
+stream is computed in batches of SCAN_BATCH, an irregular one scan by scan, a miss
+alone and never behind a batch, and the cache stays bounded."""
+
+from __future__ import annotations
+
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, Iterator, Sequence
+
+import numpy as np
+import pytest
+
+from emulator.daemon import SCAN_BATCH, ScanCache
+from emulator.scene import load_scene
+from emulator.sensors import create_sensor
+from emulator.sensors.lms200 import LmsSensor, configured_window
+from emulator.sensors.physical import apply_model_override
+from emulator.sensors.scan import Scan
+
+LMS_SCAN_PERIOD_S = 2 / 75  # a 0.5° scan takes two mirror revolutions
+TICK = 1e-6
+
+
+def railway_lms() -> LmsSensor:
+    sensor = create_sensor(apply_model_override(load_scene("railway"), "physical"), "lms")
+    assert isinstance(sensor, LmsSensor)
+    return sensor
+
+
+@pytest.fixture(scope="module")
+def sensor() -> LmsSensor:
+    return railway_lms()
+
+
+@pytest.fixture(scope="module")
+def request_keywords(sensor: LmsSensor) -> dict[str, Any]:
+    return configured_window(sensor.spec.options)
+
+
+@pytest.fixture
+def scan_thread() -> Iterator[ThreadPoolExecutor]:
+    executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="scan")  # as the daemon's
+    yield executor
+    executor.shutdown(wait=True, cancel_futures=True)
+
+
+class Recording:
+    """The sensor, with every `scan`/`scans` call logged in order; `scans` waits for `gate`."""
+
+    def __init__(self, sensor: LmsSensor) -> None:
+        self.sensor = sensor
+        self.calls: list[tuple[str, list[float]]] = []
+        self.gate = threading.Event()
+        self.gate.set()
+        self.batches_done = 0
+
+    def scan(self, time_s: float, **request: Any) -> Scan:
+        self.calls.append(("scan", [time_s]))
+        return self.sensor.scan(time_s, **request)
+
+    def scans(self, times_s: Sequence[float], **request: Any) -> list[Scan]:
+        self.calls.append(("scans", list(times_s)))
+        self.gate.wait(timeout=10)  # bounded: a test that waits here wrongly fails instead of hanging
+        scans = self.sensor.scans(times_s, **request)
+        self.batches_done += 1
+        return scans
+
+    def computed_ticks(self) -> list[int]:
+        return sorted(round(t / TICK) for _, times in self.calls for t in times)
+
+
+def test_a_steady_stream_is_served_from_batches_with_the_same_values(
+    sensor: LmsSensor, request_keywords: dict[str, Any], scan_thread: ThreadPoolExecutor
+) -> None:
+    recording = Recording(sensor)
+    cache = ScanCache(recording, scan_thread)
+    indices = range(1, 4 * SCAN_BATCH + 1)
+    served = [cache(index * LMS_SCAN_PERIOD_S, **request_keywords) for index in indices]
+
+    alone = [times for kind, times in recording.calls if kind == "scan"]
+    batches = [times for kind, times in recording.calls if kind == "scans"]
+    assert len(alone) == 3  # two strides to see the stream, then batches only
+    assert len(batches) >= 3 and all(len(times) == SCAN_BATCH for times in batches)
+    computed = recording.computed_ticks()
+    assert len(computed) == len(set(computed)), "a scan was computed twice"
+    assert len(computed) <= len(indices) + SCAN_BATCH + 1  # a stream that stops wastes one batch ahead
+    reference = railway_lms()
+    for index, scan in zip(indices, served):
+        time_s = index * LMS_SCAN_PERIOD_S
+        assert scan.time_s == time_s  # the device stamps with the time it asked for
+        np.testing.assert_array_equal(scan.values, reference.scan(time_s, **request_keywords).values)
+
+
+def test_an_irregular_stream_computes_only_what_is_asked(
+    sensor: LmsSensor, request_keywords: dict[str, Any], scan_thread: ThreadPoolExecutor
+) -> None:
+    recording = Recording(sensor)
+    cache = ScanCache(recording, scan_thread)
+    indices = np.cumsum([1, *[7, 8, 7, 9] * 3])  # a slow line rate skips scans unevenly
+    for index in indices:
+        cache(int(index) * LMS_SCAN_PERIOD_S, **request_keywords)
+    assert [kind for kind, _ in recording.calls] == ["scan"] * len(indices)
+    assert recording.computed_ticks() == sorted(round(int(i) * LMS_SCAN_PERIOD_S / TICK) for i in indices)
+
+
+def test_a_miss_is_computed_alone_and_never_waits_for_a_batch(
+    sensor: LmsSensor, request_keywords: dict[str, Any], scan_thread: ThreadPoolExecutor
+) -> None:
+    recording = Recording(sensor)
+    cache = ScanCache(recording, scan_thread)
+    recording.gate.clear()  # any batch stays unfinished until the test opens the gate
+    times = [index * LMS_SCAN_PERIOD_S for index in (1, 2, 3)]
+    for time_s in times:
+        assert cache(time_s, **request_keywords).time_s == time_s
+    # the third request made the stream steady: it was served alone, ahead of the batch it started
+    assert recording.batches_done == 0
+    assert recording.calls[:3] == [("scan", [time_s]) for time_s in times]
+    assert recording.calls[3][0] == "scans" and len(recording.calls[3][1]) == SCAN_BATCH
+    recording.gate.set()
+    cache(4 * LMS_SCAN_PERIOD_S, **request_keywords)  # foreseen: from the batch
+    assert recording.batches_done == 1 and len(recording.calls) == 4
+
+
+def test_the_cache_stays_bounded(
+    sensor: LmsSensor, request_keywords: dict[str, Any], scan_thread: ThreadPoolExecutor
+) -> None:
+    size = 2 * SCAN_BATCH
+    cache = ScanCache(Recording(sensor), scan_thread, size=size)
+    held = []
+    for index in range(1, 6 * SCAN_BATCH):
+        cache(index * LMS_SCAN_PERIOD_S, **request_keywords)
+        held.append(len(cache))
+    assert max(held) == size  # it fills up, and no further
+    with pytest.raises(ValueError, match="two batches"):
+        ScanCache(Recording(sensor), scan_thread, size=2 * SCAN_BATCH - 1)
