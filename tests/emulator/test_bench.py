@@ -35,7 +35,9 @@ def test_bench_json_reports_every_bundled_sensor_and_every_section():
         else:  # the mirror's revolutions (13.33 ms each) one scan at that resolution needs
             revolutions = {1.0: 1, 0.5: 2, 0.25: 4}[float(spec.options["resolution_deg"])]
             assert math.isclose(row["period_ms"], revolutions * 1000.0 / 75.0)
-        assert math.isclose(row["fraction"], row["scan_ms"] / row["period_ms"])
+        # a steady stream as the daemon computes it, beside the one-scan-alone figure
+        assert 0 < row["streamed_ms"] <= row["max_streamed_ms"] < math.inf
+        assert math.isclose(row["fraction"], row["streamed_ms"] / row["period_ms"])
 
     assert {(row["scene"], row["sensor"]) for row in report["rays"]} == {(s, n) for s, n, _ in expected}
     for row in report["rays"]:
@@ -53,6 +55,20 @@ def test_bench_table_shows_only_the_chosen_sections():
     assert result.returncode == 0, result.stderr
     headings = [line.split(":")[0] for line in result.stdout.splitlines() if line and not line.startswith(" ")]
     assert headings == ["rays", "memory"]
+
+
+def test_bench_scans_table_has_a_row_per_sensor_and_preset_with_both_figures():
+    result = bench("--section", "scans")
+    assert result.returncode == 0, result.stderr
+    lines = result.stdout.splitlines()
+    assert "stream ms" in lines[1] and "alone ms" in lines[1] and "fraction" in lines[1]
+    rows = [line.split() for line in lines[2:] if line.strip()]
+    sensors = sum(len(load_scene(bundled.name).sensors) for bundled in bundled_scenes())
+    assert len(rows) == 2 * sensors  # formsma2011 and physical
+    for row in rows:
+        streamed, alone, period = float(row[4]), float(row[6]), float(row[8])
+        assert streamed > 0 and alone > 0
+        assert abs(float(row[-1].rstrip("%")) - 100 * streamed / period) < 0.1  # the fraction is the streamed cost
 
 
 def test_unknown_section_is_a_usage_error():
