@@ -87,6 +87,16 @@ class Puffs:
         edge = 2.0 * particles.half_sizes
         return Puffs(particles.centers, edge * SIGMA_PER_EDGE, particles.density)
 
+    @staticmethod
+    def concatenate(parts: list[Puffs]) -> Puffs:
+        if len(parts) == 1:
+            return parts[0]
+        return Puffs(
+            np.concatenate([p.centers for p in parts]).reshape(-1, 3),
+            np.concatenate([p.sigma for p in parts]),
+            np.concatenate([p.peak_density for p in parts]),
+        )
+
 
 @dataclass(frozen=True)
 class BeamPuffCrossings:
@@ -191,8 +201,15 @@ class BeamPuffCrossings:
         return position.take(kept), self.along_m.take(kept), self.sigma.take(kept), self.before_origin.take(kept), self.column.take(kept)
 
 
-def cross_beams(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray) -> BeamPuffCrossings:
+def cross_beams(
+    puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray, row_offset: np.ndarray | None = None
+) -> BeamPuffCrossings:
     """The puffs each beam passes within REACH_SIGMAS of, before its end.
+
+    With `row_offset` (P,), a puff's pairs name the row beam + its offset:
+    the puffs of K instants, each offset by its instant × N, cross the same N
+    beams in one pass, and each pair lands on that instant's rows (pairs of one
+    row keep the order a single instant's call gives them).
 
     `directions` must be unit vectors. A scanner's beams usually form a fan
     (one origin, directions in one plane, ordered by angle): then each puff
@@ -232,6 +249,8 @@ def cross_beams(puffs: Puffs, origins: np.ndarray, directions: np.ndarray, beam_
     sigma = puffs.sigma.take(puff)
     central_column = puffs.peak_density * _SQRT_2PI * puffs.sigma  # per puff, then per pair: the same products
     column = central_column.take(puff) * np.exp(-miss_sq / (2.0 * puffs.sigma * puffs.sigma).take(puff))
+    if row_offset is not None:
+        beam = beam + row_offset.take(puff)
     return BeamPuffCrossings(beam, along, sigma, column, normal_cdf(-along / sigma))
 
 

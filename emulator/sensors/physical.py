@@ -22,6 +22,7 @@ See docs/physical-model.md for every parameter and the validation figures.
 from __future__ import annotations
 
 import dataclasses
+from typing import Sequence
 
 import numpy as np
 
@@ -29,9 +30,9 @@ from emulator.errors import UserError
 from emulator.optics import BeamHits
 from emulator.scene.model import Scene
 from emulator.sensors import lms200, urg04lx
-from emulator.sensors.physical_beams import SmokeEchoes, beam_physics
+from emulator.sensors.physical_beams import Instants, SmokeEchoes, beam_physics_at
 from emulator.sensors.physical_echo import lms_first_echo, log_threshold, smoke_return, urg_decision
-from emulator.sensors.physical_noise import lms_range_error_m, scan_rng, urg_range_noise_m
+from emulator.sensors.physical_noise import lms_range_error_m, scan_normals, urg_range_noise_m
 from emulator.sensors.physical_params import DEFAULT_PARAMS, PhysicalParams
 from emulator.sensors.response import PRESET_MODULES, Beams
 
@@ -50,14 +51,21 @@ def apply_model_override(scene: Scene, model: str | None) -> Scene:
 
 
 def urg_values(hits: BeamHits, beams: Beams, params: PhysicalParams = DEFAULT_PARAMS) -> np.ndarray:
+    return urg_values_at((hits,), (beams,), params)[0]
+
+
+def urg_values_at(hits: Sequence[BeamHits], beams: Sequence[Beams], params: PhysicalParams = DEFAULT_PARAMS) -> np.ndarray:
+    """URG values (K, N) of the same beams at K instants, computed in one pass."""
     receiver = params.urg
-    physics = beam_physics(hits, beams, receiver, params)
+    instants = Instants.of(hits, beams)
+    physics = beam_physics_at(instants, receiver, params)
     surfaces, smoke = physics.surfaces, physics.smoke
-    threshold = log_threshold(receiver, params, beams.scene.density_to_extinction)
-    smoke_echo = smoke_return(smoke.rows, smoke.amp, smoke.mid_m, len(hits), receiver)
+    scene, sensor, n = instants.beams.scene, instants.beams.sensor, len(instants.hits)
+    threshold = log_threshold(receiver, params, scene.density_to_extinction)
+    smoke_echo = smoke_return(smoke.rows, smoke.amp, smoke.mid_m, len(surfaces.amp), receiver)
     detected, coherent, range_m = urg_decision(surfaces.log_echo, surfaces.amp, surfaces.range_m, smoke_echo, threshold, receiver)
     if params.noise:
-        range_m = range_m + urg_range_noise_m(scan_rng(beams.scene.seed, beams.sensor.name, beams.time_s), range_m)
+        range_m = range_m + urg_range_noise_m(scan_normals(scene.seed, sensor.name, instants.times_s, n), range_m)
     millimetres = np.rint(np.where(detected, range_m, 0.0) * 1000.0).astype(np.int64)
     values = np.where(millimetres < urg04lx.MIN_VALUE_MM, urg04lx.NON_MEASURABLE, millimetres)
     values = np.where(millimetres > URG_MAX_VALUE_MM, urg04lx.NO_ECHO, values)  # stretched or noisy past DMAX
@@ -65,23 +73,30 @@ def urg_values(hits: BeamHits, beams: Beams, params: PhysicalParams = DEFAULT_PA
     has_surface = surfaces.present.any(axis=1)
     smoke_extinguishes = physics.optical_path_to_end > params.penetration_power
     weak = np.where(has_surface | smoke_extinguishes, urg04lx.LOW_INTENSITY, urg04lx.NO_ECHO)
-    return np.where(detected, values, weak)
+    return np.where(detected, values, weak).reshape(instants.count, n)
 
 
 def lms_values(hits: BeamHits, beams: Beams, unit: str, params: PhysicalParams = DEFAULT_PARAMS) -> np.ndarray:
+    return lms_values_at((hits,), (beams,), unit, params)[0]
+
+
+def lms_values_at(hits: Sequence[BeamHits], beams: Sequence[Beams], unit: str, params: PhysicalParams = DEFAULT_PARAMS) -> np.ndarray:
+    """LMS200 values (K, N) of the same beams at K instants, computed in one pass."""
     receiver = params.lms
-    physics = beam_physics(hits, beams, receiver, params)
+    instants = Instants.of(hits, beams)
+    physics = beam_physics_at(instants, receiver, params)
     surfaces, smoke = physics.surfaces, physics.smoke
-    threshold = log_threshold(receiver, params, beams.scene.density_to_extinction)
+    scene, sensor, n = instants.beams.scene, instants.beams.sensor, len(instants.hits)
+    threshold = log_threshold(receiver, params, scene.density_to_extinction)
     echo_m, clean = _lms_echo(surfaces.amp, surfaces.range_m, smoke, threshold, params)
     seen = np.isfinite(echo_m)
     if params.noise:
-        rng = scan_rng(beams.scene.seed, beams.sensor.name, beams.time_s)
-        echo_m = echo_m + lms_range_error_m(rng, beams.scene.seed, beams.sensor.name, beams.angles_rad)
+        normal = scan_normals(scene.seed, sensor.name, instants.times_s, n)
+        echo_m = echo_m + lms_range_error_m(normal, scene.seed, sensor.name, instants.beams.angles_rad)
     counts = np.rint(np.where(seen, np.maximum(echo_m, 0.0), 0.0) * lms200.UNITS_PER_M[unit]).astype(np.int64)
     values = np.where(counts >= lms200.ABOVE_MAXIMUM, lms200.ABOVE_MAXIMUM, counts)
     values = np.where(clean, values, LMS_SIGNAL_TO_NOISE)
-    return np.where(seen, values, lms200.NO_ECHO)
+    return np.where(seen, values, lms200.NO_ECHO).reshape(instants.count, n)
 
 
 def _lms_echo(

@@ -13,6 +13,7 @@ import dataclasses
 import functools
 import weakref
 from dataclasses import dataclass
+from typing import Iterator, Sequence
 
 import numpy as np
 
@@ -72,32 +73,84 @@ class BeamPhysics:
     optical_path_to_end: np.ndarray  # fluctuation included
 
 
+@dataclass(frozen=True)
+class Instants:
+    """One sensor's fixed beams at K instants, stacked: row k·N + b is beam b at instant k.
+
+    `hits` and `beams` are the first instant's: their fixed arrays (N,) serve
+    every instant. What changes with time is held per row: each region's
+    density (K·N,) and the regions' optical path to each beam's end.
+    """
+
+    hits: BeamHits
+    beams: Beams
+    times_s: tuple[float, ...]
+    region_density: tuple[np.ndarray, ...]
+    region_optical_path: np.ndarray
+
+    @staticmethod
+    def of(hits: Sequence[BeamHits], beams: Sequence[Beams]) -> Instants:
+        """The instants of `hits` / `beams` (one entry per instant, all of the same prepared beams)."""
+        n = len(hits[0])
+        densities = np.array([[region.density for region in h.regions] for h in hits]).reshape(len(hits), -1)
+        region_density = tuple(np.repeat(column, n) for column in densities.T)
+        path = hits[0].region_optical_path if len(hits) == 1 else np.concatenate([h.region_optical_path for h in hits])
+        return Instants(hits[0], beams[0], tuple(b.time_s for b in beams), region_density, path)
+
+    @property
+    def count(self) -> int:
+        return len(self.times_s)
+
+    def smoky_regions(self) -> Iterator[tuple[RegionCrossing, np.ndarray]]:
+        """Each region with density at some instant, with its density per row."""
+        for region, density in zip(self.hits.regions, self.region_density):
+            if density.max() > 0:
+                yield region, density
+
+    def crossings(self) -> BeamPuffCrossings:
+        """Every instant's puffs against the beams in one pass; pairs name stacked rows."""
+        world, n = self.beams.world, len(self.hits)
+        parts = [Puffs.from_particles(world.particles_at(time_s)) for time_s in self.times_s]
+        offsets = np.repeat(np.arange(self.count) * n, [len(part) for part in parts]) if self.count > 1 else None
+        return cross_beams(Puffs.concatenate(parts), self.beams.origins, self.beams.directions, self.hits.beam_end_m, offsets)
+
+
 def beam_physics(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, params: PhysicalParams) -> BeamPhysics:
     """Surfaces and smoke echoes of one scan's beams as `receiver` sees them."""
+    return beam_physics_at(Instants.of((hits,), (beams,)), receiver, params)
+
+
+def beam_physics_at(instants: Instants, receiver: ReceiverOptics, params: PhysicalParams) -> BeamPhysics:
+    """`beam_physics` of K instants in one pass, rows stacked as in `instants` (each pass's numpy
+    calls are shared by all K: per scan far cheaper than one instant at a time)."""
+    hits, beams = instants.hits, instants.beams
     scene = beams.scene
     extinction = scene.density_to_extinction
-    beam_end = hits.beam_end_m
-    crossings = cross_beams(Puffs.from_particles(beams.world.particles_at(beams.time_s)), beams.origins, beams.directions, beam_end)
-    geometry = _surface_geometry(hits, beams, receiver, params)
+    crossings = instants.crossings()
+    geometry = _surface_geometry(hits, beams, receiver, params).stacked(instants.count)
     puff_to_end_and_surfaces = crossings.optical_path_to(geometry.end_and_surfaces_m)  # one pass for every limit
-    column = hits.region_optical_path + puff_to_end_and_surfaces[:, 0]
-    smoke_start, smoke_end = _smoke_extent(hits, crossings, geometry)
+    column = instants.region_optical_path + puff_to_end_and_surfaces[:, 0]
+    smoke_start, smoke_end = _smoke_extent(instants, crossings, geometry)
     with np.errstate(invalid="ignore"):
         smoke_distance = np.where(np.isfinite(smoke_start), 0.5 * (smoke_start + smoke_end), 1.0)
-    factor = fluctuation_factor(scene.seed, beams.sensor.name, beams.angles_rad, beams.time_s, column, smoke_distance, params)
-    surfaces = _surfaces(hits, geometry, puff_to_end_and_surfaces[:, 1:], factor, beams.scene.density_to_extinction)
-    far_end = np.where(geometry.any_present, np.where(surfaces.present, surfaces.range_m, 0.0).max(axis=1), beam_end)
-    smoke = _smoke_echoes(hits, crossings, factor, smoke_start, np.minimum(smoke_end, far_end), extinction, receiver, params)
+    factor = fluctuation_factor(scene.seed, beams.sensor.name, beams.angles_rad, instants.times_s, column, smoke_distance, params)
+    surfaces = _surfaces(instants, geometry, puff_to_end_and_surfaces[:, 1:], factor, extinction)
+    far_end = np.where(geometry.any_present, np.where(surfaces.present, surfaces.range_m, 0.0).max(axis=1), geometry.beam_end_m)
+    smoke = _smoke_echoes(instants, crossings, factor, smoke_start, np.minimum(smoke_end, far_end), extinction, receiver, params)
     return BeamPhysics(surfaces, smoke, factor * column)
 
 
-def _smoke_extent(hits: BeamHits, crossings: BeamPuffCrossings, geometry: _SurfaceGeometry) -> tuple[np.ndarray, np.ndarray]:
-    start, end = crossings.extent_m(len(hits))
-    for region, (entered_at, left_at) in zip(hits.regions, geometry.region_extents):
-        if region.density > 0:
+def _smoke_extent(instants: Instants, crossings: BeamPuffCrossings, geometry: _SurfaceGeometry) -> tuple[np.ndarray, np.ndarray]:
+    start, end = crossings.extent_m(len(geometry.beam_end_m))
+    for (entered_at, left_at), density in zip(geometry.region_extents, instants.region_density):
+        if density.min() > 0:
             np.minimum(start, entered_at, out=start)
             np.maximum(end, left_at, out=end)
-    return start, np.minimum(end, hits.beam_end_m)
+        elif density.max() > 0:  # smoke at some instants only
+            smoky = density > 0
+            np.minimum(start, np.where(smoky, entered_at, np.inf), out=start)
+            np.maximum(end, np.where(smoky, left_at, -np.inf), out=end)
+    return start, np.minimum(end, geometry.beam_end_m)
 
 
 def _region_extents(hits: BeamHits) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
@@ -109,20 +162,19 @@ def _region_extents(hits: BeamHits) -> tuple[tuple[np.ndarray, np.ndarray], ...]
     return tuple(extents)
 
 
-def _region_path_to(hits: BeamHits, rows: np.ndarray, limits: np.ndarray) -> np.ndarray:
-    """Region optical path from the origin to `limits` (len(rows), S) for beams `rows`."""
+def _region_path_to(instants: Instants, rows: np.ndarray, limits: np.ndarray) -> np.ndarray:
+    """Region optical path from the origin to `limits` (len(rows), S) for stacked rows `rows`."""
     total = np.zeros(limits.shape)
-    for region in hits.regions:
-        if region.density <= 0:
-            continue
-        entry, exit_ = region.entry_m.take(rows, axis=0), region.exit_m.take(rows, axis=0)  # take: cheaper than 2-D indexing
+    beams = rows if instants.count == 1 else rows % len(instants.hits)
+    for region, density in instants.smoky_regions():
+        entry, exit_ = region.entry_m.take(beams, axis=0), region.exit_m.take(beams, axis=0)  # take: cheaper than 2-D indexing
         if entry.shape[1] == 1:  # one interval per beam (a convex region): no sum over intervals
             inside = np.minimum(exit_, limits)
             inside -= np.minimum(entry, limits)
         else:
             limit = limits[:, :, None]
             inside = (np.minimum(exit_[:, None, :], limit) - np.minimum(entry[:, None, :], limit)).sum(axis=2)
-        inside *= region.density
+        inside *= density.take(rows)[:, None]
         total += inside
     return total
 
@@ -159,6 +211,42 @@ class _SurfaceGeometry:
     cast_is_central: np.ndarray  # (N,) 1.0 where the first sub-ray is the cast beam itself, 0.0 on edge rows
     edge_positions: np.ndarray  # row-major flat positions of the edge rows' sub-rays in an (N, S) array
     region_extents: tuple[tuple[np.ndarray, np.ndarray], ...]  # `_region_extents`
+    beam_end_m: np.ndarray  # (N,) as BeamHits.beam_end_m
+
+    def stacked(self, count: int) -> _SurfaceGeometry:
+        """This geometry for `count` instants stacked row after row (`Instants`); kept per count."""
+        if count == 1:
+            return self
+        return _STACKED.get((self.ranges,), count, lambda: self._tiled(count))
+
+    def _tiled(self, count: int) -> _SurfaceGeometry:
+        n, sub_rays = self.ranges.shape
+
+        def tile(array: np.ndarray) -> np.ndarray:
+            return np.tile(array, (count,) + (1,) * (array.ndim - 1))
+
+        edge_rows = (self.edge_rows + n * np.arange(count)[:, None]).ravel()
+        geometry = _SurfaceGeometry(
+            tile(self.ranges),
+            tile(self.stretch_per_path),
+            tile(self.shares),
+            edge_rows,
+            tile(self.present),
+            tile(self.any_present),
+            tile(self.end_and_surfaces_m),
+            tile(self.log_clear_air),
+            tile(self.inverse_shares),
+            tuple(tile(chords) for chords in self.edge_region_lengths),
+            tile(self.cast_is_central),
+            (edge_rows[:, None] * sub_rays + np.arange(sub_rays)).ravel(),
+            tuple((tile(entered), tile(left)) for entered, left in self.region_extents),
+            tile(self.beam_end_m),
+        )
+        _lock(tuple(getattr(geometry, field.name) for field in dataclasses.fields(geometry)))
+        return geometry
+
+
+_STACKED = KeptPerArrays()
 
 
 _GEOMETRIES = KeptPerArrays()
@@ -221,6 +309,7 @@ def _footprint_surfaces(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, 
         cast_is_central,
         (edge_rows[:, None] * sub_rays + np.arange(sub_rays)).ravel(),
         _region_extents(hits),
+        hits.beam_end_m,
     )
     _lock(tuple(getattr(geometry, field.name) for field in dataclasses.fields(geometry)))
     return geometry
@@ -241,17 +330,17 @@ def _chords_before(region: RegionCrossing, rows: np.ndarray, limits: np.ndarray)
     return (np.minimum(exit_, limit) - np.minimum(entry, limit)).sum(axis=2)
 
 
-def _surfaces(hits: BeamHits, geometry: _SurfaceGeometry, puff_to_surfaces: np.ndarray, factor: np.ndarray, extinction: float) -> Surfaces:
-    """`geometry`'s surfaces seen through this scan's smoke; `puff_to_surfaces` (N, S) is the puffs'
-    optical path to each sub-ray's surface (0 for unused sub-rays)."""
+def _surfaces(instants: Instants, geometry: _SurfaceGeometry, puff_to_surfaces: np.ndarray, factor: np.ndarray, extinction: float) -> Surfaces:
+    """`geometry`'s surfaces (stacked for the instants) seen through their smoke; `puff_to_surfaces`
+    (K·N, S) is the puffs' optical path to each sub-ray's surface (0 for unused sub-rays)."""
     optical_path = puff_to_surfaces.copy()
-    optical_path[:, 0] += hits.region_optical_path * geometry.cast_is_central  # an edge row's sub-rays all differ from the cast beam
+    optical_path[:, 0] += instants.region_optical_path * geometry.cast_is_central  # an edge row's sub-rays all differ from the cast beam
     edge_rows = geometry.edge_rows
     if len(edge_rows):
         region_path = np.zeros((len(edge_rows), optical_path.shape[1]))
-        for region, chords in zip(hits.regions, geometry.edge_region_lengths):
-            if region.density > 0:
-                region_path += region.density * chords
+        for chords, density in zip(geometry.edge_region_lengths, instants.region_density):
+            if density.max() > 0:
+                region_path += density.take(edge_rows)[:, None] * chords
         optical_path.ravel()[geometry.edge_positions] += region_path.ravel()  # 1-D: cheaper than 2-D row indexing
     optical_path *= factor[:, None]
     log_each = optical_path * (-2.0 * extinction)
@@ -317,7 +406,7 @@ def _bin_fractions(bins: int, growth: float) -> np.ndarray:
 
 
 def _smoke_echoes(
-    hits: BeamHits,
+    instants: Instants,
     crossings: BeamPuffCrossings,
     factor: np.ndarray,
     start: np.ndarray,
@@ -331,7 +420,7 @@ def _smoke_echoes(
     length = end[rows] - low
     grid = _smoke_grid(params)
     edges = low[:, None] + length[:, None] * grid.fractions
-    path = _region_path_to(hits, rows, edges)
+    path = _region_path_to(instants, rows, edges)
     path += crossings.optical_path_on_grid(rows, low, length, grid.fractions)
     path *= factor.take(rows)[:, None]
     # each bin's mean extinction over its width, length × the bin's fraction of the extent

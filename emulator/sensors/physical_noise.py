@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import zlib
+from typing import Sequence
 
 import numpy as np
 
@@ -29,8 +30,8 @@ def scan_rng(seed: int, sensor: str, time_s: float) -> np.random.Generator:
     return np.random.default_rng(_sensor_key(seed, sensor) + [_NOISE_STREAM, int(round(time_s * 1e6)) % 2**63])
 
 
-def fluctuation_field(seed: int, sensor: str, angles_rad: np.ndarray, time_s: float, params: PhysicalParams) -> np.ndarray:
-    """A smooth field in (beam angle, time) with zero median and unit variance.
+def fluctuation_field(seed: int, sensor: str, angles_rad: np.ndarray, times_s: Sequence[float], params: PhysicalParams) -> np.ndarray:
+    """A smooth field in (beam angle, time) with zero median and unit variance, (K, N) at K times.
 
     A sum of random travelling cosines (random wavenumbers, frequencies and
     phases fixed per seed and sensor): correlated over about
@@ -42,8 +43,9 @@ def fluctuation_field(seed: int, sensor: str, angles_rad: np.ndarray, time_s: fl
     )
     # cos(k a + w t + p) = cos(k a) cos(w t + p) - sin(k a) sin(w t + p): the angle part is fixed per sensor
     along_angle = _FIELD_ANGLES.get((angles_rad, wavenumber), params.fluctuation_modes, lambda: _angle_modes(angles_rad, wavenumber))
-    in_time = frequency * time_s + phase
-    return along_angle @ np.concatenate([np.cos(in_time), np.sin(in_time)])
+    in_time = frequency * np.asarray(times_s, dtype=float)[:, None] + phase
+    in_time = np.concatenate([np.cos(in_time), np.sin(in_time)], axis=1)
+    return np.stack([along_angle @ row for row in in_time])  # one product per instant: a matrix product rounds differently
 
 
 def _angle_modes(angles_rad: np.ndarray, wavenumber: np.ndarray) -> np.ndarray:
@@ -69,14 +71,14 @@ def edge_strength(column: np.ndarray, angles_rad: np.ndarray, smoke_distance_m: 
 
     The gradient is taken between neighbouring beams (lateral spacing =
     angle step × distance to the smoke), so homogeneous smoke gives 0 and a
-    plume's flank close to 1.
+    plume's flank close to 1. Arrays are (N,) or (K, N): K instants of the same beams.
     """
-    if len(column) < 3:
-        return np.zeros(len(column))
-    padded = np.concatenate([column[:1], column, column[-1:]])
+    if column.shape[-1] < 3:
+        return np.zeros(column.shape)
+    padded = np.concatenate([column[..., :1], column, column[..., -1:]], axis=-1)
     spacing = _BEAM_SPACINGS.get((angles_rad,), None, lambda: _beam_spacing_rad(angles_rad)) * np.maximum(smoke_distance_m, 0.1)
     with np.errstate(divide="ignore", invalid="ignore"):
-        relative = np.abs(padded[2:] - padded[:-2]) / (spacing * column)
+        relative = np.abs(padded[..., 2:] - padded[..., :-2]) / (spacing * column)
     strength = relative * length_m
     strength[np.isnan(strength)] = 0.0  # no smoke on either side
     return np.minimum(np.maximum(strength, 0.0), 1.0)  # +inf (smoke only on one side) → 1
@@ -102,29 +104,38 @@ def fluctuation_factor(
     seed: int,
     sensor: str,
     angles_rad: np.ndarray,
-    time_s: float,
+    times_s: Sequence[float],
     column: np.ndarray,
     smoke_distance_m: np.ndarray,
     params: PhysicalParams,
 ) -> np.ndarray:
-    """Per beam, the factor scaling all its smoke's density: exp(amplitude × field), median 1."""
+    """Per beam and instant (K·N, stacked as `Instants`), the factor scaling all its smoke's density:
+    exp(amplitude × field), median 1."""
     if not params.fluctuation:
-        return np.ones(len(angles_rad))
-    edges = edge_strength(column, angles_rad, smoke_distance_m, params.fluctuation_length_m)
+        return np.ones(len(column))
+    shape = (len(times_s), len(angles_rad))
+    edges = edge_strength(column.reshape(shape), angles_rad, smoke_distance_m.reshape(shape), params.fluctuation_length_m)
     amplitude = params.fluctuation_bulk + params.fluctuation_edge * edges
-    return np.exp(amplitude * fluctuation_field(seed, sensor, angles_rad, time_s, params))
+    return np.exp(amplitude * fluctuation_field(seed, sensor, angles_rad, times_s, params)).ravel()
 
 
-def urg_range_noise_m(rng: np.random.Generator, range_m: np.ndarray) -> np.ndarray:
-    """Random clear-air error of the URG-04LX (datasheet accuracy read as a 2σ bound)."""
-    return rng.standard_normal(len(range_m)) * urg_noise_sigma_m(np.where(np.isfinite(range_m), range_m, 0.0))
+def scan_normals(seed: int, sensor: str, times_s: Sequence[float], per_scan: int) -> np.ndarray:
+    """`per_scan` standard normal draws for each scan at `times_s`, stacked (K·per_scan,): each
+    scan's from its own generator (`scan_rng`), so a scan draws the same alone or with others."""
+    draws = [scan_rng(seed, sensor, time_s).standard_normal(per_scan) for time_s in times_s]
+    return draws[0] if len(draws) == 1 else np.concatenate(draws)
 
 
-def lms_range_error_m(rng: np.random.Generator, seed: int, sensor: str, angles_rad: np.ndarray) -> np.ndarray:
-    """LMS200 error at sensor-frame `angles_rad`: a fixed systematic offset per beam direction
-    (uniform in ±15 mm) plus σ = 5 mm noise."""
+def urg_range_noise_m(normal: np.ndarray, range_m: np.ndarray) -> np.ndarray:
+    """Random clear-air error of the URG-04LX (datasheet accuracy read as a 2σ bound), from standard normal draws."""
+    return normal * urg_noise_sigma_m(np.where(np.isfinite(range_m), range_m, 0.0))
+
+
+def lms_range_error_m(normal: np.ndarray, seed: int, sensor: str, angles_rad: np.ndarray) -> np.ndarray:
+    """LMS200 error at sensor-frame `angles_rad` (N,) for K scans' standard normal draws (K·N,):
+    a fixed systematic offset per beam direction (uniform in ±15 mm) plus σ = 5 mm noise."""
     systematic = _SYSTEMATIC.get((angles_rad,), (seed, sensor), lambda: _lms_systematic_m(seed, sensor, np.degrees(angles_rad) + 90.0))
-    return systematic + rng.standard_normal(len(angles_rad)) * LMS_SIGMA_M
+    return (systematic + normal.reshape(-1, len(angles_rad)) * LMS_SIGMA_M).ravel()
 
 
 _SYSTEMATIC = KeptPerArrays()

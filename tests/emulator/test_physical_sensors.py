@@ -12,6 +12,7 @@ from emulator.optics import World
 from emulator.scene import load_scene
 from emulator.sensors import create_sensor
 from emulator.sensors.physical import apply_model_override
+from emulator.scene.model import Density, Plume
 from emulator.sensors.physical_reference import panel, reference_scene, room
 
 
@@ -63,3 +64,31 @@ def test_what_sensors_keep_between_scans_changes_no_value(preset):
         for name in ("lms", "urg"):
             fresh = create_sensor(scene, name, World(scene)).configured_scan(time_s).values
             np.testing.assert_array_equal(kept[name].configured_scan(time_s).values, fresh)
+
+
+def _smoke_that_comes_and_goes():
+    """A plume starting at 0.95 s and a room whose smoke starts at 1.3 s (density 0 before): a batch spanning
+    those instants mixes rows with no smoke, plume smoke only, and both."""
+    ramp = dataclasses.replace(room(0.0), density=Density(((0.0, 0.0), (1.3, 0.0), (1.6, 0.004), (3.0, 0.001))))
+    plume = Plume("puffs", (2.0, 0.3, 0.3), 10.0, 2.0, 0.3, 0.1, (0.4, 0.0, 0.0), 0.2, (0.0, 0.2, 0.0), 0.4, start=0.95)
+    objects = (panel("wall", 3.5, "white_paper", width_m=6.0), panel("steel", 1.8, "rusty_steel", yaw_deg=35.0))
+    return reference_scene(objects=objects, regions=(ramp,), plumes=(plume,), seed=5)
+
+
+@pytest.mark.parametrize("sensor", ["urg", "lms"])
+def test_scans_computed_together_equal_each_scan_computed_alone(sensor):
+    scene = _smoke_that_comes_and_goes()
+    together_sensor, alone_sensor = create_sensor(scene, sensor, World(scene)), create_sensor(scene, sensor, World(scene))
+    times = [0.9 + k * 0.08 for k in range(9)] + [2.5, 7.0]  # smoke absent, arriving, thick, leaving; uneven steps
+    together = together_sensor.scans(times)
+    assert [scan.time_s for scan in together] == times
+    for scan in together:
+        np.testing.assert_array_equal(scan.values, alone_sensor.scan(scan.time_s).values)
+    assert len({scan.values.tobytes() for scan in together}) == len(times)  # the instants really differ
+
+
+def test_a_scan_is_evaluated_on_the_microsecond_grid():
+    scene = _smoke_that_comes_and_goes()
+    lms = create_sensor(scene, "lms", World(scene))
+    np.testing.assert_array_equal(lms.scan(1.3 + 1e-9).values, lms.scan(1.3).values)
+    assert lms.scan(1.3 + 1e-9).time_s == 1.3 + 1e-9  # the scan keeps the time asked for
