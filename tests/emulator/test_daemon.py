@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from emulator.clock import WallClock
-from emulator.daemon import Daemon, Ready
+from emulator.daemon import SCAN_BATCH, Daemon, Ready
 from emulator.errors import UserError
 from emulator.scene.model import Pose, Scene, SensorSpec
 from emulator.sensors.scan import Scan
@@ -38,6 +38,7 @@ class RecordedSensor:
 
     def __init__(self) -> None:
         self.requests: list[float] = []
+        self.batches: list[list[float]] = []
         self._lock = threading.Lock()
 
     def scan(self, time_s: float) -> Scan:
@@ -48,6 +49,8 @@ class RecordedSensor:
         return Scan("urg", "urg-04lx", time_s, np.zeros(769), values)
 
     def scans(self, times_s: list[float]) -> list[Scan]:
+        with self._lock:
+            self.batches.append(list(times_s))
         return [self.scan(time_s) for time_s in times_s]
 
 
@@ -125,6 +128,16 @@ def test_endpoints_of_one_sensor_compute_each_scan_once(recorded: tuple[Running,
     stamps = [{message.split(b"\n")[2] for message in result} for result in results]
     assert len(stamps[0] & stamps[1]) >= 3  # both clients streamed the same scans
     assert len(sensor.requests) == len(set(sensor.requests)), "a scan was computed twice"
+
+
+def test_a_served_stream_is_computed_in_batches_each_scan_once(recorded: tuple[Running, RecordedSensor]) -> None:
+    running, sensor = recorded
+    md_scans(running.tcp(0), 2 * SCAN_BATCH + 4)
+    assert len(sensor.batches) >= 2 and all(len(batch) == SCAN_BATCH for batch in sensor.batches)
+    batched = sum(len(batch) for batch in sensor.batches)
+    assert len(sensor.requests) - batched <= 4  # only the scans before the stream was seen, alone
+    ticks = [round(time_s * 1e6) for time_s in sensor.requests]
+    assert len(ticks) == len(set(ticks)), "a scan was computed twice"
 
 
 def test_plan_errors_name_what_is_wrong(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
