@@ -103,6 +103,7 @@ class ScanCache:
         self._last_request: dict[str, Any] | None = None
         self._recent_times: dict[RequestKey, deque[float]] = {}
         self._predicted_until: dict[RequestKey, float] = {}
+        self._strides: dict[RequestKey, float] = {}
 
     def __call__(self, time_s: float, **request: Any) -> Scan:
         """What a device calls: the scan for this request (computed now, alone, if not foreseen)."""
@@ -117,9 +118,17 @@ class ScanCache:
         return len(self._futures)
 
     def prefetch(self, time_s: float) -> None:
-        """Start computing the scan the device will most likely ask for at `time_s`."""
-        if self._last_request is not None:
-            self._future(time_s, self._last_request)
+        """Start computing the scan the device will most likely ask for at `time_s`: the next batch
+        if it is the stream's next scan past those foreseen (the prefetch lead can exceed a stride)."""
+        request = self._last_request
+        if request is None:
+            return
+        shape = _request_key(request)
+        until, stride = self._predicted_until.get(shape), self._strides.get(shape)
+        if until is not None and stride is not None and abs(time_s - (until + stride)) <= STRIDE_TOLERANCE_S:
+            self._predict(shape, until, stride, request)
+        else:
+            self._future(time_s, request)
 
     def _future(self, time_s: float, request: dict[str, Any]) -> Future:
         key = _cache_key(time_s, request)
@@ -147,13 +156,17 @@ class ScanCache:
         strides = [later - earlier for earlier, later in zip(times, list(times)[1:])]
         if len(strides) < 2 or strides[-1] <= 0 or abs(strides[-1] - strides[-2]) > STRIDE_TOLERANCE_S:
             self._predicted_until.pop(shape, None)
+            self._strides.pop(shape, None)
             return
-        stride = strides[-1]
+        stride = self._strides[shape] = strides[-1]
         until = self._predicted_until.get(shape)
         if until is not None and until - time_s > stride + STRIDE_TOLERANCE_S:
             return  # enough foreseen
-        start = until if until is not None and until > time_s - STRIDE_TOLERANCE_S else time_s
-        predicted = [start + j * stride for j in range(1, self._batch + 1)]
+        self._predict(shape, until if until is not None and until > time_s - STRIDE_TOLERANCE_S else time_s, stride, request)
+
+    def _predict(self, shape: RequestKey, after_s: float, stride: float, request: dict[str, Any]) -> None:
+        """Foresee the stream's next SCAN_BATCH scans after `after_s`, in one job."""
+        predicted = [after_s + j * stride for j in range(1, self._batch + 1)]
         self._predicted_until[shape] = predicted[-1]
         self._submit_batch(predicted, request)
 

@@ -134,3 +134,28 @@ def test_the_cache_stays_bounded(
     assert max(held) == size  # it fills up, and no further
     with pytest.raises(ValueError, match="two batches"):
         ScanCache(Recording(sensor), scan_thread, size=2 * SCAN_BATCH - 1)
+
+
+def test_a_stream_prefetched_several_scans_ahead_is_still_computed_in_batches(
+    sensor: LmsSensor, request_keywords: dict[str, Any], scan_thread: ThreadPoolExecutor
+) -> None:
+    """The daemon prefetches each scan PREFETCH_LEAD_S (70 ms) before its deadline, which is about
+    2.6 strides of an LMS200 stream: those prefetches must extend the batches, not go alone."""
+    recording = Recording(sensor)
+    cache = ScanCache(recording, scan_thread)
+    lead_s = 0.07
+    events = sorted(
+        [(index * LMS_SCAN_PERIOD_S - lead_s, "prefetch", index) for index in range(1, 5 * SCAN_BATCH)]
+        + [(index * LMS_SCAN_PERIOD_S, "call", index) for index in range(1, 5 * SCAN_BATCH)]
+    )
+    for _, kind, index in events:
+        if kind == "prefetch":
+            cache.prefetch(index * LMS_SCAN_PERIOD_S)
+        else:
+            cache(index * LMS_SCAN_PERIOD_S, **request_keywords)
+    scan_thread.shutdown(wait=True)
+    alone = [times for kind, times in recording.calls if kind == "scan"]
+    assert len(alone) <= 5, f"{len(alone)} scans computed alone: {alone}"
+    assert [len(times) for kind, times in recording.calls if kind == "scans"][1:] == [SCAN_BATCH] * 4
+    ticks = recording.computed_ticks()
+    assert len(ticks) == len(set(ticks)), "a scan was computed twice"
