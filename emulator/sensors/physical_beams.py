@@ -5,6 +5,7 @@ beam as cumulative optical paths on a per-beam grid of range bins (smoke
 regions exactly from their entry/exit distances, plume puffs analytically),
 the fluctuation factor scaling each beam's smoke, and the surfaces the beam's
 footprint meets (sub-rays at depth edges), each with its optical path.
+A sensor's beams at several instants are computed together (`Instants`).
 """
 
 from __future__ import annotations
@@ -115,14 +116,9 @@ class Instants:
         return cross_beams(Puffs.concatenate(parts), self.beams.origins, self.beams.directions, self.hits.beam_end_m, offsets)
 
 
-def beam_physics(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, params: PhysicalParams) -> BeamPhysics:
-    """Surfaces and smoke echoes of one scan's beams as `receiver` sees them."""
-    return beam_physics_at(Instants.of((hits,), (beams,)), receiver, params)
-
-
 def beam_physics_at(instants: Instants, receiver: ReceiverOptics, params: PhysicalParams) -> BeamPhysics:
-    """`beam_physics` of K instants in one pass, rows stacked as in `instants` (each pass's numpy
-    calls are shared by all K: per scan far cheaper than one instant at a time)."""
+    """Surfaces and smoke echoes of the beams at K instants as `receiver` sees them, rows stacked as
+    in `instants`: each pass's numpy calls are shared by all K, per scan far cheaper than one at a time."""
     hits, beams = instants.hits, instants.beams
     scene = beams.scene
     extinction = scene.density_to_extinction
