@@ -30,10 +30,10 @@ from emulator.errors import UserError
 from emulator.optics import BeamHits
 from emulator.scene.model import Scene
 from emulator.sensors import lms200, urg04lx
-from emulator.sensors.physical_beams import Instants, SmokeEchoes, beam_physics_at
+from emulator.sensors.physical_beams import BeamPhysics, Instants, SmokeEchoes, beam_physics_at
 from emulator.sensors.physical_echo import lms_first_echo, log_threshold, smoke_return, urg_decision
 from emulator.sensors.physical_noise import lms_range_error_m, scan_normals, urg_range_noise_m
-from emulator.sensors.physical_params import DEFAULT_PARAMS, PhysicalParams
+from emulator.sensors.physical_params import DEFAULT_PARAMS, PhysicalParams, ReceiverOptics
 from emulator.sensors.response import PRESET_MODULES, Beams
 
 URG_INCOHERENT = 8  # SCIP: intensity of the two waves do not match
@@ -57,15 +57,12 @@ def urg_values(hits: BeamHits, beams: Beams, params: PhysicalParams = DEFAULT_PA
 def urg_values_at(hits: Sequence[BeamHits], beams: Sequence[Beams], params: PhysicalParams = DEFAULT_PARAMS) -> np.ndarray:
     """URG values (K, N) of the same beams at K instants, computed in one pass."""
     receiver = params.urg
-    instants = Instants.of(hits, beams)
-    physics = beam_physics_at(instants, receiver, params)
+    instants, physics, threshold = _physics(hits, beams, receiver, params)
     surfaces, smoke = physics.surfaces, physics.smoke
-    scene, sensor, n = instants.beams.scene, instants.beams.sensor, len(instants.hits)
-    threshold = log_threshold(receiver, params, scene.density_to_extinction)
     smoke_echo = smoke_return(smoke.rows, smoke.amp, smoke.mid_m, len(surfaces.amp), receiver)
     detected, coherent, range_m = urg_decision(surfaces.log_echo, surfaces.amp, surfaces.range_m, smoke_echo, threshold, receiver)
     if params.noise:
-        range_m = range_m + urg_range_noise_m(scan_normals(scene.seed, sensor.name, instants.times_s, n), range_m)
+        range_m = range_m + urg_range_noise_m(_scan_normals(instants), range_m)
     millimetres = np.rint(np.where(detected, range_m, 0.0) * 1000.0).astype(np.int64)
     values = np.where(millimetres < urg04lx.MIN_VALUE_MM, urg04lx.NON_MEASURABLE, millimetres)
     values = np.where(millimetres > URG_MAX_VALUE_MM, urg04lx.NO_ECHO, values)  # stretched or noisy past DMAX
@@ -73,7 +70,7 @@ def urg_values_at(hits: Sequence[BeamHits], beams: Sequence[Beams], params: Phys
     has_surface = surfaces.present.any(axis=1)
     smoke_extinguishes = physics.optical_path_to_end > params.penetration_power
     weak = np.where(has_surface | smoke_extinguishes, urg04lx.LOW_INTENSITY, urg04lx.NO_ECHO)
-    return np.where(detected, values, weak).reshape(instants.count, n)
+    return np.where(detected, values, weak).reshape(instants.count, -1)
 
 
 def lms_values(hits: BeamHits, beams: Beams, unit: str, params: PhysicalParams = DEFAULT_PARAMS) -> np.ndarray:
@@ -83,20 +80,32 @@ def lms_values(hits: BeamHits, beams: Beams, unit: str, params: PhysicalParams =
 def lms_values_at(hits: Sequence[BeamHits], beams: Sequence[Beams], unit: str, params: PhysicalParams = DEFAULT_PARAMS) -> np.ndarray:
     """LMS200 values (K, N) of the same beams at K instants, computed in one pass."""
     receiver = params.lms
-    instants = Instants.of(hits, beams)
-    physics = beam_physics_at(instants, receiver, params)
+    instants, physics, threshold = _physics(hits, beams, receiver, params)
     surfaces, smoke = physics.surfaces, physics.smoke
-    scene, sensor, n = instants.beams.scene, instants.beams.sensor, len(instants.hits)
-    threshold = log_threshold(receiver, params, scene.density_to_extinction)
     echo_m, clean = _lms_echo(surfaces.amp, surfaces.range_m, smoke, threshold, params)
     seen = np.isfinite(echo_m)
     if params.noise:
-        normal = scan_normals(scene.seed, sensor.name, instants.times_s, n)
-        echo_m = echo_m + lms_range_error_m(normal, scene.seed, sensor.name, instants.beams.angles_rad)
+        scene, sensor = instants.beams.scene, instants.beams.sensor
+        echo_m = echo_m + lms_range_error_m(_scan_normals(instants), scene.seed, sensor.name, instants.beams.angles_rad)
     counts = np.rint(np.where(seen, np.maximum(echo_m, 0.0), 0.0) * lms200.UNITS_PER_M[unit]).astype(np.int64)
     values = np.where(counts >= lms200.ABOVE_MAXIMUM, lms200.ABOVE_MAXIMUM, counts)
     values = np.where(clean, values, LMS_SIGNAL_TO_NOISE)
-    return np.where(seen, values, lms200.NO_ECHO).reshape(instants.count, n)
+    return np.where(seen, values, lms200.NO_ECHO).reshape(instants.count, -1)
+
+
+def _physics(
+    hits: Sequence[BeamHits], beams: Sequence[Beams], receiver: ReceiverOptics, params: PhysicalParams
+) -> tuple[Instants, BeamPhysics, float]:
+    """The instants, their beams' physics as `receiver` sees it, and its ln detection threshold."""
+    instants = Instants.of(hits, beams)
+    threshold = log_threshold(receiver, params, instants.beams.scene.density_to_extinction)
+    return instants, beam_physics_at(instants, receiver, params), threshold
+
+
+def _scan_normals(instants: Instants) -> np.ndarray:
+    """Each scan's standard normal draws, one per beam, stacked as the instants' rows."""
+    beams = instants.beams
+    return scan_normals(beams.scene.seed, beams.sensor.name, instants.times_s, len(instants.hits))
 
 
 def _lms_echo(
