@@ -6,7 +6,7 @@ import argparse
 import dataclasses
 
 from emulator.scene import Scene, load_scene
-from emulator.sensors.physical import apply_model_override
+from emulator.sensors.response import apply_model_override
 
 
 def add_scene_options(parser: argparse.ArgumentParser, *, optional_scene: bool = False, seed: bool = True) -> None:

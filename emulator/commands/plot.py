@@ -14,7 +14,7 @@ from pathlib import Path
 
 from emulator.commands.options import add_scene_options, scene_from_args
 from emulator.errors import UserError
-from emulator.plotting import draw_waterfall, pyplot, sensor_series
+from emulator.plots.waterfall import draw_waterfall, pyplot, sensor_series
 
 MAX_PIXELS = 8000
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from emulator.commands.options import add_scene_options, scene_from_args
 from emulator.errors import UserError
-from emulator.logfile import LogHeader, write_log
+from emulator.recording.textlog import LogHeader, write_log
 from emulator.sensors import create_sensor
 from emulator.sensors.series import scan_series, scan_times
 

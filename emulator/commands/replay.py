@@ -15,11 +15,16 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.clock import WallClock
 from emulator.commands.serve import serve_until_signalled
-from emulator.daemon import Daemon
-from emulator.logfile import Log, read_log
-from emulator.replay import LMS_MODEL, MODELS, URG_MODEL, replay_sensor
+from emulator.daemon.clock import WallClock
+from emulator.daemon.service import Daemon
+from emulator.recording.replay_sources import (
+    LMS_MODEL,
+    MODELS,
+    URG_MODEL,
+    replay_sensor,
+)
+from emulator.recording.textlog import Log, read_log
 from emulator.scene.model import Pose, Scene, SensorSpec
 
 DEFAULT_ENDPOINTS = {URG_MODEL: "tcp:127.0.0.1:10940", LMS_MODEL: "pty:ttyLMS0"}

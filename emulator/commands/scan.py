@@ -16,7 +16,6 @@ import numpy as np
 from emulator.commands.options import add_scene_options, scene_from_args
 from emulator.sensors import Scan, create_sensor, ranges_m
 
-
 ANGLE_DECIMALS = 9  # the devices' angles are exact in far fewer digits; drop float noise
 
 

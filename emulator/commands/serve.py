@@ -13,12 +13,12 @@ import signal
 import sys
 from typing import Mapping, Sequence
 
-from emulator.clock import WallClock
 from emulator.commands.options import add_scene_options, scene_from_args
-from emulator.daemon import Daemon, Ready
+from emulator.daemon.clock import WallClock
+from emulator.daemon.service import Daemon, Ready
 from emulator.errors import UserError
 from emulator.scene import Scene
-from emulator.transport import EndpointClaims, parse_endpoint
+from emulator.scene.endpoints import EndpointClaims, parse_endpoint
 
 SWITCH_INTERVAL_S = 0.0005
 

@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from emulator.scene.model import Box, Cylinder, MeshFile, Shape, Sphere
 from emulator.scene.geometry import shape_mesh
+from emulator.scene.model import Box, Cylinder, MeshFile, Shape, Sphere
 
 NO_HIT = np.inf
 _CROSSING_CHUNK = 2_000_000  # rays × triangles per Möller–Trumbore batch

@@ -22,6 +22,7 @@ from types import MappingProxyType
 from typing import Any, Iterable, Mapping, Sequence
 
 from emulator.errors import SceneError, UserError
+from emulator.scene.endpoints import Address, EndpointClaims, TcpAddress, parse_endpoint
 from emulator.scene.geometry import MeshLoadError, load_mesh_file
 from emulator.scene.materials import BUILTIN_MATERIALS, DEFAULT_MATERIAL
 from emulator.scene.model import (
@@ -40,7 +41,6 @@ from emulator.scene.model import (
     Sphere,
     Vec3,
 )
-from emulator.transport import Address, EndpointClaims, TcpAddress, parse_endpoint
 
 BUNDLED_PACKAGE = "emulator.bundled_scenes"
 SCENE_SUFFIX = ".toml"

@@ -16,6 +16,7 @@ cast more rays, the beams' geometry and time).
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 from dataclasses import dataclass
 from types import ModuleType
@@ -27,7 +28,7 @@ from emulator.errors import UserError
 from emulator.optics import BeamHits, World
 from emulator.scene.model import Scene, SensorSpec
 
-PRESET_MODULES = {"formsma2011": "emulator.sensors.formsma2011", "physical": "emulator.sensors.physical"}
+PRESET_MODULES = {"formsma2011": "emulator.sensors.formsma2011", "physical": "emulator.sensors.physical.preset"}
 
 
 @dataclass(frozen=True)
@@ -41,6 +42,15 @@ class Beams:
     angles_rad: np.ndarray
     origins: np.ndarray
     directions: np.ndarray
+
+
+def apply_model_override(scene: Scene, model: str | None) -> Scene:
+    """`scene` with its smoke/sensor model replaced (a CLI `--model`); None keeps it."""
+    if model is None:
+        return scene
+    if model not in PRESET_MODULES:
+        raise UserError(f"unknown smoke model {model!r} (known: {', '.join(PRESET_MODULES)})")
+    return dataclasses.replace(scene, model=model)
 
 
 def response_model(preset: str) -> ModuleType:

@@ -7,15 +7,7 @@ its endpoint's `send`. It never looks inside the bytes.
 
 from __future__ import annotations
 
-import ipaddress
-import os
-from dataclasses import dataclass
-from typing import Protocol, Union
-
-from emulator.errors import UserError
-
-WILDCARD = "*"  # a bind to 0.0.0.0 or :: owns its port on every address (Linux)
-HOST_ALIASES = {"localhost": "127.0.0.1"}
+from typing import Protocol
 
 
 class Session(Protocol):
@@ -30,85 +22,3 @@ class Session(Protocol):
     @property
     def baud(self) -> int | None:
         """The device's current line rate, None for an unpaced link."""
-
-
-@dataclass(frozen=True)
-class PtyAddress:
-    """`pty:PATH`: a pty published under the symlink PATH (relative to the cwd)."""
-
-    path: str
-
-    def __str__(self) -> str:
-        return f"pty:{self.path}"
-
-
-@dataclass(frozen=True)
-class TcpAddress:
-    """`tcp:HOST:PORT`; port 0 lets the system choose (the ready line names it)."""
-
-    host: str
-    port: int
-
-    def __str__(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"tcp:{host}:{self.port}"
-
-
-Address = Union[PtyAddress, TcpAddress]
-
-
-def parse_endpoint(uri: str) -> Address:
-    """`pty:PATH` or `tcp:HOST:PORT` (IPv6 hosts in brackets); UserError otherwise."""
-    scheme, sep, rest = uri.partition(":")
-    if sep and scheme == "pty":
-        if not rest:
-            raise UserError(f"endpoint {uri!r}: pty needs a path (pty:PATH)")
-        return PtyAddress(rest)
-    if sep and scheme == "tcp":
-        host, sep, port_text = rest.rpartition(":")
-        host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
-        if not sep or not host or not port_text.isdigit() or not 0 <= int(port_text) <= 65535:
-            raise UserError(f"endpoint {uri!r}: expected tcp:HOST:PORT with PORT 0..65535")
-        return TcpAddress(host, int(port_text))
-    raise UserError(f"endpoint {uri!r}: expected pty:PATH or tcp:HOST:PORT")
-
-
-def endpoints_clash(first: Address, second: Address) -> bool:
-    """Whether `second` could not be served beside `first`: the same pty path, or one
-    TCP port on the same host or with a wildcard host on either side. Port 0 asks
-    for a fresh port each time, so it never clashes."""
-    if isinstance(first, PtyAddress) and isinstance(second, PtyAddress):
-        return os.path.abspath(first.path) == os.path.abspath(second.path)
-    if isinstance(first, TcpAddress) and isinstance(second, TcpAddress):
-        if first.port != second.port or first.port == 0:
-            return False
-        hosts = {_bind_host(first.host), _bind_host(second.host)}
-        return len(hosts) == 1 or WILDCARD in hosts
-    return False
-
-
-def _bind_host(host: str) -> str:
-    """One spelling per host as bind() sees it: case-insensitive, `localhost` as
-    127.0.0.1, IP addresses in canonical form, every wildcard as WILDCARD."""
-    host = HOST_ALIASES.get(host.lower(), host.lower())
-    if host == WILDCARD:
-        return WILDCARD
-    try:
-        address = ipaddress.ip_address(host)
-    except ValueError:
-        return host
-    return WILDCARD if address.is_unspecified else str(address)
-
-
-class EndpointClaims:
-    """The endpoints taken so far and by whom, to refuse one that would clash when bound."""
-
-    def __init__(self) -> None:
-        self._taken: list[tuple[Address, str]] = []
-
-    def claim(self, address: Address, owner: str) -> tuple[Address, str] | None:
-        """Take `address` for `owner`; if it clashes, the (endpoint, owner) already there instead."""
-        clash = next(((taken, holder) for taken, holder in self._taken if endpoints_clash(taken, address)), None)
-        if clash is None:
-            self._taken.append((address, owner))
-        return clash

@@ -19,7 +19,8 @@ import tty
 from pathlib import Path
 
 from emulator.errors import UserError
-from emulator.transport import PtyAddress, Session
+from emulator.scene.endpoints import PtyAddress
+from emulator.transport import Session
 from emulator.transport.link import READ_SIZE, ClientSlot
 from emulator.transport.outbox import DEFAULT_LIMIT_BYTES
 

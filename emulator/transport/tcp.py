@@ -13,7 +13,8 @@ import asyncio
 import socket
 
 from emulator.errors import UserError
-from emulator.transport import Session, TcpAddress
+from emulator.scene.endpoints import TcpAddress
+from emulator.transport import Session
 from emulator.transport.link import READ_SIZE, ClientSlot
 from emulator.transport.outbox import DEFAULT_LIMIT_BYTES
 

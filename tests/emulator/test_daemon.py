@@ -14,8 +14,9 @@ from typing import Iterator
 import numpy as np
 import pytest
 
-from emulator.clock import WallClock
-from emulator.daemon import SCAN_BATCH, Daemon, Ready
+from emulator.daemon.clock import WallClock
+from emulator.daemon.scan_cache import SCAN_BATCH
+from emulator.daemon.service import Daemon, Ready
 from emulator.errors import UserError
 from emulator.scene.model import Pose, Scene, SensorSpec
 from emulator.sensors.scan import Scan

@@ -13,7 +13,17 @@ from hypothesis import strategies as st
 from emulator.optics import World
 from emulator.optics.chords import slab_intervals
 from emulator.scene.model import (
-    Box, Cylinder, Density, Material, MeshFile, Plume, Pose, Scene, SceneObject, SmokeRegion, Sphere,
+    Box,
+    Cylinder,
+    Density,
+    Material,
+    MeshFile,
+    Plume,
+    Pose,
+    Scene,
+    SceneObject,
+    SmokeRegion,
+    Sphere,
 )
 
 MATERIALS = {"default": Material("default", 0.5), "white": Material("white", 0.9)}

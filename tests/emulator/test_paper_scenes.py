@@ -9,14 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from emulator.validation import report as validation
+from emulator.bench.serve_process import ServeProcess, free_tcp_port
 from emulator.optics import World
-from emulator.plotting import saturation
+from emulator.plots.waterfall import saturation
 from emulator.scene import bundled_scenes, load_scene
 from emulator.scene.plumes import particles_at
 from emulator.sensors import create_sensor
-from emulator.serve_process import ServeProcess, free_tcp_port
-from emulator import validation
-from emulator.validation import keyframe_crossings, machine_on_intervals
+from emulator.validation.report import keyframe_crossings, machine_on_intervals
 
 PENETRATION_POWER = 0.007  # d·m, paper eq. 1
 TARGET_RANGE_M = 2.5

@@ -7,9 +7,9 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from emulator.sensors.physical_beams import bin_fractions
-from emulator.sensors.physical_echo import lms_first_echo, log_threshold
-from emulator.sensors.physical_params import DEFAULT_PARAMS, LmsReceiver
+from emulator.sensors.physical.beams import bin_fractions
+from emulator.sensors.physical.echo import lms_first_echo, log_threshold
+from emulator.sensors.physical.params import DEFAULT_PARAMS, LmsReceiver
 
 K = 250.0
 

@@ -14,9 +14,19 @@ from emulator.optics.puffs import Puffs, cross_beams, erf, normal_cdf
 from emulator.scene.material_optics import BUILTIN_OPTICS, patch_values
 from emulator.scene.materials import BUILTIN_MATERIALS
 from emulator.scene.plumes import Particles
-from emulator.sensors.physical_echo import lms_first_echo, log_target_echo, log_threshold, range_law, smoke_bin_echo
-from emulator.sensors.physical_noise import edge_strength, fluctuation_factor, fluctuation_field
-from emulator.sensors.physical_params import DEFAULT_PARAMS, LmsReceiver
+from emulator.sensors.physical.echo import (
+    lms_first_echo,
+    log_target_echo,
+    log_threshold,
+    range_law,
+    smoke_bin_echo,
+)
+from emulator.sensors.physical.noise import (
+    edge_strength,
+    fluctuation_factor,
+    fluctuation_field,
+)
+from emulator.sensors.physical.params import DEFAULT_PARAMS, LmsReceiver
 
 K = 250.0  # density_to_extinction, 1/m per density unit
 

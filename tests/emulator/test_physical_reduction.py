@@ -16,10 +16,17 @@ from hypothesis import strategies as st
 
 from emulator.optics import World
 from emulator.scene.model import Box, Density, Pose, SmokeRegion
-from emulator.sensors import create_sensor, formsma2011, physical
-from emulator.sensors.physical_params import DEFAULT_PARAMS
-from emulator.sensors.physical_reference import URG_FRONT, cast_beams, panel, reference_scene, room
+from emulator.sensors import create_sensor, formsma2011
+from emulator.sensors.physical import preset as physical
+from emulator.sensors.physical.params import DEFAULT_PARAMS
 from emulator.sensors.urg04lx import step_angles_rad
+from emulator.validation.reference_scenes import (
+    URG_FRONT,
+    cast_beams,
+    panel,
+    reference_scene,
+    room,
+)
 
 EXACT = DEFAULT_PARAMS.exact()
 VALID_ANGLES = step_angles_rad()[44:726]

@@ -10,10 +10,10 @@ import pytest
 from emulator.errors import UserError
 from emulator.optics import World
 from emulator.scene import load_scene
-from emulator.sensors import create_sensor
-from emulator.sensors.physical import apply_model_override
 from emulator.scene.model import Density, Plume
-from emulator.sensors.physical_reference import panel, reference_scene, room
+from emulator.sensors import create_sensor
+from emulator.sensors.response import apply_model_override
+from emulator.validation.reference_scenes import panel, reference_scene, room
 
 
 def _scans(scene, time_s):

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from emulator.physical_validation import (
+from emulator.validation.physical_targets import (
     clear_air_noise,
     fifty_percent_point,
     lms_homogeneous_ranges,

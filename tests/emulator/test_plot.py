@@ -10,7 +10,13 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from emulator.plotting import ERROR_RGB, NO_RETURN_RGB, saturation, sensor_series, waterfall_rgb
+from emulator.plots.waterfall import (
+    ERROR_RGB,
+    NO_RETURN_RGB,
+    saturation,
+    sensor_series,
+    waterfall_rgb,
+)
 from emulator.scene import load_scene
 
 CLI = [sys.executable, "-m", "emulator.cli"]

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from emulator.errors import UserError
-from emulator.logfile import LogHeader, format_scan, read_log, write_log
-from emulator.replay import LmsReplay, UrgReplay, replay_sensor
+from emulator.recording.replay_sources import LmsReplay, UrgReplay, replay_sensor
+from emulator.recording.textlog import LogHeader, format_scan, read_log, write_log
 from emulator.scene import load_scene
 from emulator.sensors import create_sensor
 from emulator.sensors.scan import Scan

@@ -11,11 +11,11 @@ from typing import Any, Iterator, Sequence
 import numpy as np
 import pytest
 
-from emulator.daemon import SCAN_BATCH, ScanCache
+from emulator.daemon.scan_cache import SCAN_BATCH, ScanCache
 from emulator.scene import load_scene
 from emulator.sensors import create_sensor
 from emulator.sensors.lms200 import LmsSensor, configured_window
-from emulator.sensors.physical import apply_model_override
+from emulator.sensors.response import apply_model_override
 from emulator.sensors.scan import Scan
 
 LMS_SCAN_PERIOD_S = 2 / 75  # a 0.5° scan takes two mirror revolutions

@@ -12,7 +12,7 @@ import pytest
 
 from emulator.scene import load_scene
 from emulator.sensors import create_sensor
-from emulator.sensors.physical import apply_model_override
+from emulator.sensors.response import apply_model_override
 
 SCENE = """
 [scene]

@@ -11,7 +11,15 @@ import pytest
 from emulator.errors import UserError
 from emulator.optics import World
 from emulator.scene.model import (
-    Box, Density, Material, Plume, Pose, Scene, SceneObject, SensorSpec, SmokeRegion,
+    Box,
+    Density,
+    Material,
+    Plume,
+    Pose,
+    Scene,
+    SceneObject,
+    SensorSpec,
+    SmokeRegion,
 )
 from emulator.sensors import LmsSensor, UrgSensor, create_sensor, ranges_m
 

@@ -16,7 +16,17 @@ from hypothesis import strategies as st
 
 from emulator.optics import World
 from emulator.scene.model import (
-    Box, Cylinder, Density, Material, Plume, Pose, Scene, SceneObject, SensorSpec, SmokeRegion, Sphere,
+    Box,
+    Cylinder,
+    Density,
+    Material,
+    Plume,
+    Pose,
+    Scene,
+    SceneObject,
+    SensorSpec,
+    SmokeRegion,
+    Sphere,
 )
 from emulator.sensors import create_sensor
 from emulator.sensors.scan import simulated_instant

@@ -14,10 +14,10 @@ from pathlib import Path
 import pytest
 import serial
 
+from emulator.bench.serve_process import ServeProcess, free_tcp_port, serve_command
 from emulator.commands.serve import refuse_clashing_endpoints
 from emulator.errors import UserError
 from emulator.scene import load_scene
-from emulator.serve_process import ServeProcess, free_tcp_port, serve_command
 from protocols.lms2xx import build_telegram
 
 MD_FULL = b"MD0044072501000"  # urg_library: steps 44..725, cluster 1, every scan, unlimited

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from emulator.serve_process import ServeProcess
-from emulator.transport.bench import _Line
+from emulator.bench.serve_process import ServeProcess
+from emulator.bench.transport_latency import _Line
 
 # A driver that opens the endpoint, starts an unlimited MD, reads the first scan,
 # then hangs without reading (scans pile up in the pty / socket) until SIGKILLed.

@@ -6,10 +6,10 @@ import socket
 
 import numpy as np
 
+from emulator.bench.serve_process import ServeProcess
 from emulator.scene import load_scene
 from emulator.sensors import create_sensor
-from emulator.sensors.physical import apply_model_override
-from emulator.serve_process import ServeProcess
+from emulator.sensors.response import apply_model_override
 from protocols.scip.encoding import decode_values, join_data_lines
 
 GD_FULL = b"GD0000076801"

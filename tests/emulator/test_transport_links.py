@@ -21,10 +21,10 @@ from typing import Any, Callable, Iterator
 import pytest
 import serial
 
-from emulator.clock import WallClock
-from emulator.daemon import DeviceSession
+from emulator.daemon.clock import WallClock
+from emulator.daemon.service import DeviceSession
 from emulator.errors import UserError
-from emulator.transport import PtyAddress, TcpAddress
+from emulator.scene.endpoints import PtyAddress, TcpAddress
 from emulator.transport.pty import PtyEndpoint
 from emulator.transport.tcp import TcpEndpoint
 from protocols.device import Output

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 from interop_support import write_room
 
-from emulator.serve_process import ServeProcess, free_tcp_port
+from emulator.bench.serve_process import ServeProcess, free_tcp_port
 
 
 @pytest.fixture

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from emulator.serve_process import serve_command
+from emulator.bench.serve_process import serve_command
 
 # A closed room, a pillar, a box and a block of static smoke on the front left:
 # no plumes and no noise, so every scan equals `lrf-emulator scan` at any time,

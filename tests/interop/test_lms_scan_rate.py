@@ -1,4 +1,4 @@
-"""The LMS200 scans/s measurement (emulator.interop_bench), in a short version.
+"""The LMS200 scans/s measurement (emulator.bench.lms_rates), in a short version.
 
 This checks the measurement's structure and arithmetic, not timing
 thresholds: the full table (5 s per cell) is in docs/interop.md.
@@ -10,7 +10,12 @@ from pathlib import Path
 
 import pytest
 
-from emulator.interop_bench import b0_telegram_bytes, line_rate_limit, lms_scan_rates, table_lines
+from emulator.bench.lms_rates import (
+    b0_telegram_bytes,
+    line_rate_limit,
+    lms_scan_rates,
+    table_lines,
+)
 
 
 def test_line_rate_limits() -> None:

@@ -4,7 +4,7 @@ sicktoolbox (ROS sicklms) opens the port at 9600, asks for its target rate
 with `20 40` before anything else, follows the device to 38400, then sends
 20 25, 3A, 31, 74, 20 24 and reads streamed B0 telegrams. When a rate gets no
 answer it probes the others with `32`. The client below is a pyserial host
-that shares no code with the device (emulator.lms_serial_client).
+that shares no code with the device (emulator.bench.lms_client).
 """
 
 from __future__ import annotations
@@ -14,10 +14,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from emulator.lms_serial_client import ACK, LmsSerialClient, Telegram
-
 from interop_support import scan_values
+
+from emulator.bench.lms_client import ACK, LmsSerialClient, Telegram
 
 A0_OK = bytes.fromhex("02 80 03 00 A0 00 10 16 0A")  # verified vector: A0, OK, status 0x10
 

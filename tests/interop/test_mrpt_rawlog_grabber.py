@@ -16,11 +16,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from emulator.interop_bench import line_rate_limit
 from interop_support import require_program, scan_values, urg_step_values
 
-from emulator.serve_process import free_tcp_port
+from emulator.bench.lms_rates import line_rate_limit
+from emulator.bench.serve_process import free_tcp_port
 
 MRPT_HINT = "apt-get install mrpt-apps (.ci/run installs it)"
 

@@ -2,7 +2,7 @@
 
 The real `lrf-emulator record` writes a log of a bundled scene; the real
 `lrf-emulator replay` process serves it; hokuyolx (PyPI, unmodified) reads the
-URG-04LX over TCP, and a pyserial LMS200 host (emulator.lms_serial_client,
+URG-04LX over TCP, and a pyserial LMS200 host (emulator.bench.lms_client,
 which shares no code with the device) reads B0 telegrams over the pty.
 """
 
@@ -22,9 +22,9 @@ import numpy as np
 import pytest
 from hokuyolx import HokuyoLX
 
-from emulator.lms_serial_client import LmsSerialClient, Telegram
-from emulator.logfile import Log, read_log
-from emulator.serve_process import ReadyEndpoint, parse_ready_line
+from emulator.bench.lms_client import LmsSerialClient, Telegram
+from emulator.bench.serve_process import ReadyEndpoint, parse_ready_line
+from emulator.recording.textlog import Log, read_log
 
 CLI = [sys.executable, "-m", "emulator.cli"]
 URG_VALID = slice(44, 726)

@@ -17,8 +17,8 @@ import pytest
 import serial
 from interop_support import require_program
 
-from emulator.lms_serial_client import ACK, LmsSerialClient, Telegram
-from emulator.serve_process import free_tcp_port
+from emulator.bench.lms_client import ACK, LmsSerialClient, Telegram
+from emulator.bench.serve_process import free_tcp_port
 
 
 @pytest.fixture

@@ -7,7 +7,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from protocols.lms2xx import CorruptTelegram, Telegram, TelegramReader, build_telegram, crc16
+from protocols.lms2xx import (
+    CorruptTelegram,
+    Telegram,
+    TelegramReader,
+    build_telegram,
+    crc16,
+)
 
 
 def reference_crc(data: bytes) -> int:

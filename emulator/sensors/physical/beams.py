@@ -24,9 +24,9 @@ from emulator.optics.kept import KeptPerArrays
 from emulator.optics.puffs import BeamPuffCrossings, Puffs, cross_beams
 from emulator.scene.material_optics import optics_for, patch_values
 from emulator.sensors.beam_geometry import scan_plane_rays
-from emulator.sensors.physical_echo import echoing, log_clear_air_echo, smoke_bin_echo
-from emulator.sensors.physical_noise import fluctuation_factor
-from emulator.sensors.physical_params import PhysicalParams, ReceiverOptics
+from emulator.sensors.physical.echo import echoing, log_clear_air_echo, smoke_bin_echo
+from emulator.sensors.physical.noise import fluctuation_factor
+from emulator.sensors.physical.params import PhysicalParams, ReceiverOptics
 from emulator.sensors.response import Beams
 
 

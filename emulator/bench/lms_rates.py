@@ -14,8 +14,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from emulator.lms_serial_client import BAUD_COMMANDS, LmsSerialClient, Telegram
-from emulator.serve_process import ServeProcess, private_endpoints
+from emulator.bench.lms_client import BAUD_COMMANDS, LmsSerialClient, Telegram
+from emulator.bench.serve_process import ServeProcess, private_endpoints
 
 MIRROR_HZ = 75.0
 BITS_PER_BYTE = 10  # 8N1: start bit, 8 data bits, stop bit
@@ -123,7 +123,7 @@ def bench_section(quick: bool) -> tuple[dict, list[str]]:
 
 
 def main() -> None:
-    """`python -m emulator.interop_bench`: the full table (about a minute)."""
+    """`python -m emulator.bench.lms_rates`: the full table (about a minute)."""
     started = time.monotonic()
     print("\n".join(table_lines(lms_scan_rates())))
     print(f"({time.monotonic() - started:.0f} s)")

@@ -19,12 +19,18 @@ from pathlib import Path
 import numpy as np
 
 from emulator.errors import UserError
-from emulator.plotting import (
-    PNG_METADATA, SATURATION_CLEAR, SATURATION_NOTE, SensorSeries, draw_waterfall, pyplot, saturation,
+from emulator.plots.waterfall import (
+    PNG_METADATA,
+    SATURATION_CLEAR,
+    SATURATION_NOTE,
+    SensorSeries,
+    draw_waterfall,
+    pyplot,
+    saturation,
     sensor_series,
 )
-from emulator.physical_validation import physical_section
 from emulator.scene import Scene, load_scene
+from emulator.validation.physical_targets import physical_section
 
 PENETRATION_POWER = 0.007  # d·m, paper eq. 1
 BOCAS_TARGET_M = 2.5
@@ -281,11 +287,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         write_report(Path(args[0]))
     except UserError as error:
-        sys.stderr.write(f"emulator.validation: {error}\n")
+        sys.stderr.write(f"emulator.validation.report: {error}\n")
         return 2
     print(f"wrote {args[0]}")
     return 0
 
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -1,6 +1,6 @@
 """Latency and jitter of the real daemon, as a driver sees them.
 
-Starts `lrf-emulator serve` (emulator.serve_process) on temporary pty and
+Starts `lrf-emulator serve` (emulator.bench.serve_process) on temporary pty and
 TCP endpoints and measures, with plain blocking file descriptors and
 sockets (no client library in the way):
 - command → first reply byte latency for `VV`, p50 / p99 / max;
@@ -21,7 +21,7 @@ from typing import Callable
 
 import numpy as np
 
-from emulator.serve_process import ServeProcess
+from emulator.bench.serve_process import ServeProcess
 
 LATENCY_TARGET_MS = 10.0
 JITTER_TARGET_MS = 2.0

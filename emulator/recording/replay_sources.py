@@ -17,7 +17,7 @@ from typing import Sequence
 import numpy as np
 
 from emulator.errors import UserError
-from emulator.logfile import Log
+from emulator.recording.textlog import Log
 from emulator.sensors.scan import Scan
 
 URG_MODEL = "urg-04lx"

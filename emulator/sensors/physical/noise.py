@@ -14,7 +14,12 @@ import numpy as np
 
 from emulator.optics.kept import KeptPerArrays
 from emulator.scene.plumes import splitmix64
-from emulator.sensors.physical_params import LMS_SIGMA_M, LMS_SYSTEMATIC_M, PhysicalParams, urg_noise_sigma_m
+from emulator.sensors.physical.params import (
+    LMS_SIGMA_M,
+    LMS_SYSTEMATIC_M,
+    PhysicalParams,
+    urg_noise_sigma_m,
+)
 
 _FLUCTUATION_STREAM = 0xF1
 _NOISE_STREAM = 0x4E

@@ -19,20 +19,23 @@ each numpy pass among them; a request nobody foresaw is still computed alone.
 from __future__ import annotations
 
 import asyncio
-import dataclasses
 import os
-from collections import OrderedDict, deque
-from concurrent.futures import Executor, Future, ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping, Protocol, Sequence
+from typing import Callable, Mapping, Protocol, Sequence
 
-from emulator.clock import WallClock
+from emulator.daemon.clock import WallClock
+from emulator.daemon.scan_cache import (
+    PREFETCH_LEAD_S,
+    ScanCache,
+    SensorFactory,
+)
 from emulator.errors import UserError
 from emulator.optics import World
+from emulator.scene.endpoints import Address, EndpointClaims, PtyAddress, parse_endpoint
 from emulator.scene.model import Scene, SensorSpec
 from emulator.sensors import create_sensor
-from emulator.sensors.scan import TICKS_PER_S, Scan  # cache keys are µs ticks: the grid scans are computed on
-from emulator.transport import Address, EndpointClaims, PtyAddress, parse_endpoint
+from emulator.sensors.scan import Scan
 from emulator.transport.pty import PtyEndpoint
 from emulator.transport.tcp import TcpEndpoint
 from emulator.transport.timer import PreciseTimer
@@ -40,24 +43,14 @@ from protocols.device import Device, Output
 from protocols.lms2xx import Lms200Device
 from protocols.scip import UrgDevice
 
-SCAN_CACHE_SIZE = 32  # recent scan requests per sensor; endpoints of one sensor share them
-# Scans computed per job in a steady stream: `physical` pays ~500 numpy calls a
-# pass whatever the number of instants, so 8 share that floor well, while a
-# stream that stops wastes at most one batch (0.2 s of LMS200 scans).
-SCAN_BATCH = 8
-# Two strides are the same stream if they agree this closely: devices ask at
-# index × period, which the µs grid rounds to strides one tick apart.
-STRIDE_TOLERANCE_S = 1e-6
-# Start a scan this long (wall) before its deadline: early enough to be ready,
-# late enough not to compete for the CPU with the previous scan's delivery
-# (on a pty the kernel forwards bytes on a worker thread that a busy CPU delays).
-PREFETCH_LEAD_S = 0.07
-
 # the SensorSpec options each protocol device takes (SCENE_FORMAT.md)
 DEVICE_OPTIONS: dict[str, tuple[str, ...]] = {
     "urg-04lx": ("serial", "boot_protocol"),
     "lms200": ("baud", "type_string", "angle_deg", "resolution_deg", "units", "firmware_profile"),
 }
+
+
+DeviceFactory = Callable[[SensorSpec, Callable[..., Scan]], Device]
 
 
 class Clock(Protocol):
@@ -68,142 +61,6 @@ class Clock(Protocol):
 
 class Cancellable(Protocol):
     def cancel(self) -> None: ...
-
-
-class ScanSource(Protocol):
-    """What a device needs from a sensor: the scan for a request at a simulated time,
-    and the same request at several times computed together."""
-
-    def scan(self, time_s: float, **request: Any) -> Scan: ...
-
-    def scans(self, times_s: Sequence[float], **request: Any) -> list[Scan]: ...
-
-
-SensorFactory = Callable[[SensorSpec], ScanSource]
-DeviceFactory = Callable[[SensorSpec, Callable[..., Scan]], Device]
-RequestKey = tuple[tuple[str, Any], ...]
-
-
-class ScanCache:
-    """One sensor's scans for all its endpoints: each request computed once, on the
-    scan thread, and ahead of time where the next request can be foreseen: the last
-    request's window at the device's next deadline (`prefetch`), and the next
-    SCAN_BATCH scans of a steady stream, in one `sensor.scans` job."""
-
-    def __init__(
-        self, sensor: ScanSource, executor: Executor, size: int = SCAN_CACHE_SIZE, batch: int = SCAN_BATCH
-    ) -> None:
-        if size < 2 * batch:
-            raise ValueError(f"a scan cache of {size} cannot hold two batches of {batch}")
-        self._sensor = sensor
-        self._executor = executor
-        self._size = size
-        self._batch = batch
-        self._futures: OrderedDict[tuple, Future] = OrderedDict()
-        self._last_request: dict[str, Any] | None = None
-        self._recent_times: dict[RequestKey, deque[float]] = {}
-        self._predicted_until: dict[RequestKey, float] = {}
-        self._strides: dict[RequestKey, float] = {}
-
-    def __call__(self, time_s: float, **request: Any) -> Scan:
-        """What a device calls: the scan for this request (computed now, alone, if not foreseen)."""
-        self._last_request = request
-        future = self._future(time_s, request)
-        self._follow_stream(time_s, request)
-        scan = future.result()
-        return scan if scan.time_s == time_s else dataclasses.replace(scan, time_s=time_s)
-
-    def __len__(self) -> int:
-        """How many scans (done or under way) the cache holds: at most its size."""
-        return len(self._futures)
-
-    def prefetch(self, time_s: float) -> None:
-        """Start computing the scan the device will most likely ask for at `time_s`: the next batch
-        if it is the stream's next scan past those foreseen (the prefetch lead can exceed a stride)."""
-        request = self._last_request
-        if request is None:
-            return
-        shape = _request_key(request)
-        until, stride = self._predicted_until.get(shape), self._strides.get(shape)
-        if until is not None and stride is not None and abs(time_s - (until + stride)) <= STRIDE_TOLERANCE_S:
-            self._predict(shape, until, stride, request)
-        else:
-            self._future(time_s, request)
-
-    def _future(self, time_s: float, request: dict[str, Any]) -> Future:
-        key = _cache_key(time_s, request)
-        future = self._futures.get(key)
-        if future is None:
-            future = self._executor.submit(self._sensor.scan, time_s, **request)
-            self._store(key, future)
-        else:
-            self._futures.move_to_end(key)
-        return future
-
-    def _store(self, key: tuple, future: Future) -> None:
-        self._futures[key] = future
-        if len(self._futures) > self._size:
-            self._futures.popitem(last=False)
-
-    def _follow_stream(self, time_s: float, request: dict[str, Any]) -> None:
-        """Batch the stream's next scans once its last two strides agree and at most
-        one foreseen scan is left: the batch is then one stride ahead of its first use."""
-        shape = _request_key(request)
-        times = self._recent_times.setdefault(shape, deque(maxlen=3))
-        if times and round(times[-1] * TICKS_PER_S) == round(time_s * TICKS_PER_S):
-            return  # another endpoint asking for the same scan
-        times.append(time_s)
-        strides = [later - earlier for earlier, later in zip(times, list(times)[1:])]
-        if len(strides) < 2 or strides[-1] <= 0 or abs(strides[-1] - strides[-2]) > STRIDE_TOLERANCE_S:
-            self._predicted_until.pop(shape, None)
-            self._strides.pop(shape, None)
-            return
-        stride = self._strides[shape] = strides[-1]
-        until = self._predicted_until.get(shape)
-        if until is not None and until - time_s > stride + STRIDE_TOLERANCE_S:
-            return  # enough foreseen
-        self._predict(shape, until if until is not None and until > time_s - STRIDE_TOLERANCE_S else time_s, stride, request)
-
-    def _predict(self, shape: RequestKey, after_s: float, stride: float, request: dict[str, Any]) -> None:
-        """Foresee the stream's next SCAN_BATCH scans after `after_s`, in one job."""
-        predicted = [after_s + j * stride for j in range(1, self._batch + 1)]
-        self._predicted_until[shape] = predicted[-1]
-        self._submit_batch(predicted, request)
-
-    def _submit_batch(self, times_s: list[float], request: dict[str, Any]) -> None:
-        """One `sensor.scans` job for the times not already foreseen; a future per time."""
-        wanted = [(time_s, _cache_key(time_s, request)) for time_s in times_s]
-        wanted = [(time_s, key) for time_s, key in wanted if key not in self._futures]
-        if not wanted:
-            return
-        job = self._executor.submit(self._sensor.scans, [time_s for time_s, _ in wanted], **request)
-        parts: list[Future] = []
-        for _, key in wanted:
-            parts.append(Future())
-            self._store(key, parts[-1])
-        job.add_done_callback(lambda done: _settle(done, parts))
-
-
-def _request_key(request: dict[str, Any]) -> RequestKey:
-    return tuple(sorted(request.items()))
-
-
-def _cache_key(time_s: float, request: dict[str, Any]) -> tuple:
-    """The µs tick and the request: a foreseen t + j·d meets the device's (index + j) × period."""
-    return (round(time_s * TICKS_PER_S), *_request_key(request))
-
-
-def _settle(job: Future, parts: list[Future]) -> None:
-    """Hand each of a batch job's scans (or its failure) to the future of its time."""
-    if job.cancelled():
-        for part in parts:
-            part.cancel()
-    elif job.exception() is not None:
-        for part in parts:
-            part.set_exception(job.exception())
-    else:
-        for part, scan in zip(parts, job.result()):
-            part.set_result(scan)
 
 
 def simulated_sensors(scene: Scene) -> SensorFactory:

@@ -4,7 +4,7 @@ It talks to the emulator the way sicktoolbox, Player and MRPT talk to a real
 unit (framing, CRC, ACK, following the device's baud rate on the port's
 termios), and deliberately shares no code with `protocols/lms2xx`, so that it
 checks the device rather than agreeing with it. Used by the interop tests and
-by the scans/s measurement in `emulator.interop_bench`.
+by the scans/s measurement in `emulator.bench.lms_rates`.
 """
 
 from __future__ import annotations

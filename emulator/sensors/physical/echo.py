@@ -19,7 +19,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from emulator.optics.kept import KeptPerArrays
-from emulator.sensors.physical_params import SPEED_OF_LIGHT_M_S, LmsReceiver, PhysicalParams, ReceiverOptics, UrgReceiver
+from emulator.sensors.physical.params import (
+    SPEED_OF_LIGHT_M_S,
+    LmsReceiver,
+    PhysicalParams,
+    ReceiverOptics,
+    UrgReceiver,
+)
 
 
 def range_law(range_m: np.ndarray, receiver: ReceiverOptics, params: PhysicalParams) -> np.ndarray:

@@ -8,7 +8,17 @@ import numpy as np
 
 from emulator.optics import BeamHits, World
 from emulator.scene.materials import BUILTIN_MATERIALS
-from emulator.scene.model import Box, Density, Material, Plume, Pose, Scene, SceneObject, SensorSpec, SmokeRegion
+from emulator.scene.model import (
+    Box,
+    Density,
+    Material,
+    Plume,
+    Pose,
+    Scene,
+    SceneObject,
+    SensorSpec,
+    SmokeRegion,
+)
 from emulator.sensors import lms200, urg04lx
 from emulator.sensors.beam_geometry import scan_plane_rays
 from emulator.sensors.response import Beams

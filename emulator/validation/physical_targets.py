@@ -17,11 +17,22 @@ import numpy as np
 from emulator.optics import World
 from emulator.scene import load_scene
 from emulator.scene.model import Material
-from emulator.sensors import lms200, physical
-from emulator.sensors.physical import LMS_SIGNAL_TO_NOISE, apply_model_override
-from emulator.sensors.physical_params import DEFAULT_PARAMS, PhysicalParams, urg_noise_sigma_m
-from emulator.sensors.physical_reference import cast_beams, panel, reference_scene, room
+from emulator.sensors import lms200
+from emulator.sensors.physical import preset as physical
+from emulator.sensors.physical.params import (
+    DEFAULT_PARAMS,
+    PhysicalParams,
+    urg_noise_sigma_m,
+)
+from emulator.sensors.physical.preset import LMS_SIGNAL_TO_NOISE
+from emulator.sensors.response import apply_model_override
 from emulator.sensors.urg04lx import MIN_VALUE_MM
+from emulator.validation.reference_scenes import (
+    cast_beams,
+    panel,
+    reference_scene,
+    room,
+)
 
 PENETRATION_POWER = DEFAULT_PARAMS.penetration_power
 URG_STEP_RAD = 2.0 * np.pi / 1024
@@ -302,15 +313,15 @@ def _render_section(figures_dir: Path) -> str:
             "",
             "![URG error rate vs optical path](figures/physical_s_curve.png)",
             "",
-            f"- **Target 1** (exact reduction): with noise, fluctuation, backscatter, mixed pixels and material",
+            "- **Target 1** (exact reduction): with noise, fluctuation, backscatter, mixed pixels and material",
             "  effects off, the reference beam equals `formsma2011` for any region arrangement (hypothesis test).",
-            f"- **Target 2**: the reference target's error rate is an S-curve with its 50 % point at",
+            "- **Target 2**: the reference target's error rate is an S-curve with its 50 % point at",
             f"  {reference_fifty * 1000:.3f}·10⁻³ d·m (paper: 7.000·10⁻³).",
             "- **Target 3**: at a fixed optical path darker and farther targets fail more often (curves above).",
             "",
             "![Homogeneous smoke: LMS200 and URG-04LX; materials](figures/physical_homogeneous.png)",
             "",
-            f"- **Target 4**: the LMS200's reading of white paper 2 m away falls steadily from",
+            "- **Target 4**: the LMS200's reading of white paper 2 m away falls steadily from",
             f"  {smoke_band.max():.2f} m to {smoke_band.min():.2f} m as the smoke thickens (roughly as 1/density,",
             "  the paper's hypothesis 3); the URG-04LX fails near 2.8·10⁻³ d and returns short readings",
             "  again in very thick smoke (Pascoal's third regime).",

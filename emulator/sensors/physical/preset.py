@@ -21,33 +21,39 @@ See docs/physical-model.md for every parameter and the validation figures.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Sequence
 
 import numpy as np
 
-from emulator.errors import UserError
 from emulator.optics import BeamHits
-from emulator.scene.model import Scene
 from emulator.sensors import lms200, urg04lx
-from emulator.sensors.physical_beams import BeamPhysics, Instants, SmokeEchoes, beam_physics_at
-from emulator.sensors.physical_echo import lms_first_echo, log_threshold, smoke_return, urg_decision
-from emulator.sensors.physical_noise import lms_range_error_m, scan_normals, urg_range_noise_m
-from emulator.sensors.physical_params import DEFAULT_PARAMS, PhysicalParams, ReceiverOptics
-from emulator.sensors.response import PRESET_MODULES, Beams
+from emulator.sensors.physical.beams import (
+    BeamPhysics,
+    Instants,
+    SmokeEchoes,
+    beam_physics_at,
+)
+from emulator.sensors.physical.echo import (
+    lms_first_echo,
+    log_threshold,
+    smoke_return,
+    urg_decision,
+)
+from emulator.sensors.physical.noise import (
+    lms_range_error_m,
+    scan_normals,
+    urg_range_noise_m,
+)
+from emulator.sensors.physical.params import (
+    DEFAULT_PARAMS,
+    PhysicalParams,
+    ReceiverOptics,
+)
+from emulator.sensors.response import Beams
 
 URG_INCOHERENT = 8  # SCIP: intensity of the two waves do not match
 URG_MAX_VALUE_MM = int(round(urg04lx.MAX_RANGE_M * 1000.0))
 LMS_SIGNAL_TO_NOISE = 8187  # LMS2xx: signal-to-noise ratio too small
-
-
-def apply_model_override(scene: Scene, model: str | None) -> Scene:
-    """`scene` with its smoke/sensor model replaced (a CLI `--model`); None keeps it."""
-    if model is None:
-        return scene
-    if model not in PRESET_MODULES:
-        raise UserError(f"unknown smoke model {model!r} (known: {', '.join(PRESET_MODULES)})")
-    return dataclasses.replace(scene, model=model)
 
 
 def urg_values(hits: BeamHits, beams: Beams, params: PhysicalParams = DEFAULT_PARAMS) -> np.ndarray:

@@ -1,0 +1,191 @@
+"""Bench sections: each `(quick: bool) -> (data, lines)`; `data` is merged into the JSON
+object and `lines` are printed in the table. Add a section by adding it to `SECTIONS`.
+
+- rays: plain Embree INTERSECT versus our full cast (`World.cast`) on the same
+  beams of every bundled scene's sensors with the smoke removed; several scans
+  are batched per call, as a daemon with several clients would. `ratio` is
+  ours/raw in rays per second over all scenes.
+- scans: compute time per scan for each bundled scene, sensor and smoke/sensor
+  preset (each scene under every preset, as `--model` would serve it), with
+  smoke, against the sensor's period: URG-04LX 100 ms; LMS200 the scan its
+  scene options select against the time the mirror needs for it (1° → 1
+  revolution of 13.33 ms, 0.5° → 2, 0.25° → 4; the default 361-value scan: 26.67 ms).
+  `fraction` is the cost of a steady stream as the daemon computes it
+  (`sensor.scans` of SCAN_BATCH consecutive scans, divided by SCAN_BATCH);
+  one scan computed alone (a request nobody foresaw) is its own column.
+- transport: command latency and MD scan jitter through a served daemon
+  (`transport_latency`).
+- lms-rates: LMS200 scans/s per baud and resolution through a served daemon
+  (`lms_rates`).
+- memory: peak resident set size of this process (last, so it covers the others).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import resource
+import time
+from typing import Callable
+
+import numpy as np
+
+from emulator.daemon.scan_cache import SCAN_BATCH
+from emulator.optics import World
+from emulator.scene import bundled_scenes, load_scene
+from emulator.scene.model import Scene, SensorSpec
+from emulator.sensors import Sensor, create_sensor, lms200, urg04lx
+from emulator.sensors.beam_geometry import scan_plane_rays
+from emulator.sensors.response import PRESET_MODULES, apply_model_override
+
+SCANS_PER_BATCH = 16
+SCAN_REPEATS = 3  # each instant is timed this often and the fastest kept
+
+
+Section = tuple[dict, list[str]]
+
+
+def _scenes() -> list[Scene]:
+    return [load_scene(bundled.name) for bundled in bundled_scenes()]
+
+
+def _sensor_beams(spec: SensorSpec) -> tuple[np.ndarray, np.ndarray, float]:
+    """Origins, directions and cast range of one scan of the sensor (valid URG steps; the LMS's window)."""
+    if spec.model == urg04lx.MODEL:
+        angles = urg04lx.step_angles_rad()[urg04lx.FIRST_VALID_STEP : urg04lx.LAST_VALID_STEP + 1]
+        origins, directions = scan_plane_rays(spec.pose, angles)
+        return origins, directions, urg04lx.MAX_RANGE_M
+    window = lms200.configured_window(spec.options)
+    angles = np.radians(lms200.device_angles_deg(window["start_deg"], window["step_deg"], window["count"]) - 90.0)
+    origins, directions = scan_plane_rays(spec.pose, angles)
+    return origins, directions, lms200.REACH_M
+
+
+def _best_seconds(function: Callable[[], object], repeats: int) -> float:
+    """The fastest of `repeats` timed calls: the machine's speed, not its other load."""
+    best = np.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        function()
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def rays_section(quick: bool) -> Section:
+    repeats = 3 if quick else 30
+    rows, raw_total, ours_total, rays_total = [], 0.0, 0.0, 0
+    for scene in _scenes():
+        world = World(dataclasses.replace(scene, regions=(), plumes=()))
+        for spec in scene.sensors:
+            origins, directions, max_range = _sensor_beams(spec)
+            origins = np.ascontiguousarray(np.tile(origins, (SCANS_PER_BATCH, 1)), dtype=np.float32)
+            directions = np.ascontiguousarray(np.tile(directions, (SCANS_PER_BATCH, 1)), dtype=np.float32)
+            raw = _best_seconds(lambda: world.first_triangles(origins, directions, max_range), repeats)
+            ours = _best_seconds(lambda: world.cast(origins, directions, max_range, 0.0), repeats)
+            rays = len(origins)
+            rows.append({
+                "scene": scene.path.stem if scene.path else scene.name,
+                "sensor": spec.name,
+                "rays": rays,
+                "raw_rays_per_s": rays / raw,
+                "ours_rays_per_s": rays / ours,
+                "ratio": raw / ours,
+            })
+            raw_total, ours_total, rays_total = raw_total + raw, ours_total + ours, rays_total + rays
+    ratio = raw_total / ours_total
+    lines = [f"rays: plain Embree INTERSECT vs our cast, smoke removed, {SCANS_PER_BATCH} scans per call"]
+    lines.append(f"  {'scene':<10} {'sensor':<8} {'rays':>6} {'raw Mrays/s':>12} {'ours Mrays/s':>13} {'ratio':>6}")
+    for row in rows:
+        lines.append(
+            f"  {row['scene']:<10} {row['sensor']:<8} {row['rays']:>6} {row['raw_rays_per_s'] / 1e6:>12.2f}"
+            f" {row['ours_rays_per_s'] / 1e6:>13.2f} {row['ratio']:>6.2f}"
+        )
+    lines.append(f"  overall ratio (ours/raw): {ratio:.2f} (target >= 0.5)")
+    return {"ratio": ratio, "rays": rows}, lines
+
+
+def _configured_stream(sensor: Sensor, times_s: list[float]) -> None:
+    """The scene-configured scan at each of `times_s`, computed together as the daemon's scan cache does."""
+    if isinstance(sensor, lms200.LmsSensor):
+        sensor.scans(times_s, **lms200.configured_window(sensor.spec.options))
+    else:
+        sensor.scans(times_s)
+
+
+def scans_section(quick: bool) -> Section:
+    """Compute time per scan at instants spread over the first minute of each scene (smoke on) under each
+    preset: one scan alone, and a steady stream (SCAN_BATCH consecutive scans from that instant in one
+    `scans` call, per scan). Per instant the fastest of SCAN_REPEATS, so other load on the machine does
+    not count; mean and max over instants. `fraction` is the streamed cost against the period."""
+    times = np.linspace(1.0, 60.0, 5 if quick else 60)
+    rows = []
+    for bundled in _scenes():
+        for preset in PRESET_MODULES:
+            scene = apply_model_override(bundled, preset)
+            world = World(scene)
+            for spec in scene.sensors:
+                sensor = create_sensor(scene, spec.name, world)
+                sensor.configured_scan(0.0)  # the first call pays one-off set-up
+                period_s = sensor.configured_period_s
+                alone = [_best_seconds(lambda: sensor.configured_scan(float(t)), SCAN_REPEATS) for t in times]
+                streamed = [
+                    _best_seconds(
+                        lambda: _configured_stream(sensor, [float(t) + j * period_s for j in range(SCAN_BATCH)]),
+                        SCAN_REPEATS,
+                    )
+                    / SCAN_BATCH
+                    for t in times
+                ]
+                streamed_ms = float(np.mean(streamed)) * 1000.0
+                period_ms = period_s * 1000.0
+                rows.append({
+                    "scene": scene.path.stem if scene.path else scene.name,
+                    "sensor": spec.name,
+                    "model": spec.model,
+                    "preset": preset,
+                    "scan_ms": float(np.mean(alone)) * 1000.0,
+                    "max_scan_ms": float(np.max(alone)) * 1000.0,
+                    "streamed_ms": streamed_ms,
+                    "max_streamed_ms": float(np.max(streamed)) * 1000.0,
+                    "period_ms": period_ms,
+                    "fraction": streamed_ms / period_ms,
+                })
+    lines = [
+        f"scans: compute time per scan with smoke (mean and max over {len(times)} instants in 1..60 s,"
+        f" best of {SCAN_REPEATS} each); streamed = {SCAN_BATCH} consecutive scans per call as the daemon"
+        " computes a steady stream, alone = one scan by itself; fraction = streamed / period",
+        f"  {'scene':<10} {'sensor':<8} {'model':<9} {'preset':<12} {'stream ms':>9} {'max ms':>7}"
+        f" {'alone ms':>9} {'max ms':>7} {'period ms':>10} {'fraction':>9}",
+    ]
+    for row in rows:
+        lines.append(
+            f"  {row['scene']:<10} {row['sensor']:<8} {row['model']:<9} {row['preset']:<12}"
+            f" {row['streamed_ms']:>9.2f} {row['max_streamed_ms']:>7.2f} {row['scan_ms']:>9.2f}"
+            f" {row['max_scan_ms']:>7.2f} {row['period_ms']:>10.2f} {row['fraction']:>8.1%}"
+        )
+    return {"scans": rows}, lines
+
+
+def transport_section(quick: bool) -> Section:
+    from emulator.bench.transport_latency import transport_bench  # starts a daemon: imported only when run
+
+    return transport_bench(quick)
+
+
+def lms_rates_section(quick: bool) -> Section:
+    from emulator.bench.lms_rates import bench_section  # starts a daemon: imported only when run
+
+    return bench_section(quick)
+
+
+def memory_section(quick: bool) -> Section:
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
+    return {"peak_rss_mb": peak_mb}, [f"memory: peak RSS {peak_mb:.1f} MB (this process)"]
+
+
+SECTIONS: dict[str, Callable[[bool], Section]] = {
+    "rays": rays_section,
+    "scans": scans_section,
+    "transport": transport_section,
+    "lms-rates": lms_rates_section,
+    "memory": memory_section,
+}
