@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.optics.kept import KeptPerArrays
+from emulator.optics.fans import beam_segments, dot_rows, fan_pairs
 from emulator.scene.plumes import Particles
 
 SIGMA_PER_EDGE = 1.0 / np.sqrt(2.0 * np.pi)
@@ -218,24 +218,24 @@ def cross_beams(
     """
     if len(puffs) == 0 or len(origins) == 0:
         return _no_crossings()
-    segments = _segments_of(origins, directions, beam_end_m)
-    far = _far_from(segments, puffs)
+    reach_of_puff = REACH_SIGMAS * puffs.sigma
+    segments = beam_segments(origins, directions, beam_end_m)
+    far = segments.far_from(puffs.centers, reach_of_puff)
     if far.all():
         return _no_crossings()
     fan = segments.fan
     if fan is not None:  # a fan has one origin: each puff's offset and distance once, not once per pair
         offset = np.subtract(puffs.centers.T, origins[0][:, None], order="C")  # (3, P): a row per axis
-        beam, puff = _fan_pairs(fan, puffs, offset, far)
-        distance_sq = _dot_rows(offset, offset).take(puff)
-        along = _dot_rows(offset.take(puff, axis=1), fan.directions_by_axis.take(beam, axis=1))
+        beam, puff = fan_pairs(fan, offset, reach_of_puff, far)
+        distance_sq = dot_rows(offset, offset).take(puff)
+        along = dot_rows(offset.take(puff, axis=1), fan.directions_by_axis.take(beam, axis=1))
     else:
         near = (~far).nonzero()[0]
         beam, puff = _all_pairs(len(origins), len(near))
         puff = near.take(puff)
         offset = (puffs.centers.take(puff, axis=0) - origins.take(beam, axis=0)).T
-        distance_sq = _dot_rows(offset, offset)
-        along = _dot_rows(offset, directions.take(beam, axis=0).T)
-    reach_of_puff = REACH_SIGMAS * puffs.sigma
+        distance_sq = dot_rows(offset, offset)
+        along = dot_rows(offset, directions.take(beam, axis=0).T)
     reach = reach_of_puff.take(puff)
     before_end = (along < beam_end_m.take(beam) + reach).nonzero()[0]  # the test that culls: first, on every candidate
     beam, puff, along, distance_sq, reach = beam.take(before_end), puff.take(before_end), along.take(before_end), distance_sq.take(before_end), reach.take(before_end)
@@ -257,14 +257,6 @@ def cross_beams(
 _SQRT_2PI = np.sqrt(2.0 * np.pi)
 
 
-def _dot_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Dot products of the columns of (3, n) arrays, summed in einsum's order ((x + z) + y): the same bits."""
-    product = a * b
-    total = product[0] + product[2]
-    total += product[1]
-    return total
-
-
 def _no_crossings() -> BeamPuffCrossings:
     empty = np.zeros(0)
     return BeamPuffCrossings(np.zeros(0, dtype=np.int64), empty, empty, empty, empty)
@@ -273,124 +265,3 @@ def _no_crossings() -> BeamPuffCrossings:
 def _all_pairs(n_beams: int, n_puffs: int) -> tuple[np.ndarray, np.ndarray]:
     beam, puff = np.meshgrid(np.arange(n_beams), np.arange(n_puffs), indexing="ij")
     return beam.ravel(), puff.ravel()
-
-
-@dataclass(frozen=True)
-class _Fan:
-    """A fan's plane (`first`, `second` in it, `normal`) and its beams' angles in it, ascending;
-    `axes_by_row` (3, 3, 1) holds (normal, first, second) as columns, to project (3, P) offsets in one pass;
-    `directions_by_axis` (3, N) the beams' directions, one contiguous row per axis."""
-
-    first: np.ndarray
-    second: np.ndarray
-    normal: np.ndarray
-    beam_angle: np.ndarray
-    axes_by_row: np.ndarray
-    directions_by_axis: np.ndarray
-
-
-_FANS = KeptPerArrays()
-
-
-def _fan_of(origins: np.ndarray, directions: np.ndarray) -> _Fan | None:
-    """The beams' fan, or None if they are no fan; kept for a sensor's read-only beam arrays."""
-    return _FANS.get((origins, directions), None, lambda: _fan_geometry(origins, directions))
-
-
-def _fan_geometry(origins: np.ndarray, directions: np.ndarray) -> _Fan | None:
-    if len(origins) < 2 or np.ptp(origins, axis=0).max() > 0.0:
-        return None
-    first = directions[len(directions) // 2]
-    normal = _cross(directions[0], directions[-1])
-    if np.linalg.norm(normal) < 1e-9:
-        normal = _cross(directions[0], directions[1])
-    normal /= np.linalg.norm(normal)
-    second = _cross(normal, first)
-    if np.abs(_dot(directions, normal)).max() > 1e-9:
-        return None
-    beam_angle = np.arctan2(_dot(directions, second), _dot(directions, first))
-    if np.all(np.diff(beam_angle) < 0):
-        second, beam_angle = -second, -beam_angle
-    if np.any(np.diff(beam_angle) <= 0):
-        return None
-    axes_by_row = np.stack([normal, first, second], axis=1)[:, :, None]
-    directions_by_axis = np.ascontiguousarray(directions.T)
-    for array in (first, second, normal, beam_angle, axes_by_row, directions_by_axis):
-        array.flags.writeable = False  # kept and shared by later scans
-    return _Fan(first, second, normal, beam_angle, axes_by_row, directions_by_axis)
-
-
-def _fan_pairs(fan: _Fan, puffs: Puffs, offset: np.ndarray, far: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Candidate (beam, puff) pairs of a fan of beams, given each puff's `offset` (3, P) from its origin:
-    the beams within each puff's angular reach, grouped by puff, ascending; none for `far` puffs."""
-    beam_angle, axes = fan.beam_angle, fan.axes_by_row
-    # each row as _dot computes it: o0·a0 + o1·a1 + o2·a2
-    height, x, y = offset[0] * axes[0] + offset[1] * axes[1] + offset[2] * axes[2]
-    reach = REACH_SIGMAS * puffs.sigma
-    in_plane = np.sqrt(np.maximum(reach * reach - height * height, 0.0))
-    distance = np.hypot(x, y)
-    around_origin = distance <= in_plane  # every beam's angle: set below, whatever half_width says
-    half_width = np.arcsin(np.minimum(in_plane, distance) / np.maximum(distance, _TINIEST))  # never 0 / 0
-    centre = np.arctan2(y, x)
-    skipped = np.abs(height) >= reach
-    skipped |= far
-    lower_edge, upper_edge = centre - half_width, centre + half_width
-    # an interval reaching past ±pi may hold beams one turn away (checked with a margin: a needless turn adds no pairs)
-    wraps = upper_edge.max() > beam_angle[0] + (2.0 * np.pi - 1e-9) or lower_edge.min() < beam_angle[-1] - (2.0 * np.pi - 1e-9)
-    beams, puff_of = [], []
-    for turn in (-2.0 * np.pi, 0.0, 2.0 * np.pi) if wraps else (0.0,):
-        low = beam_angle.searchsorted(centre + turn - half_width if turn else lower_edge, side="left")
-        high = beam_angle.searchsorted(centre + turn + half_width if turn else upper_edge, side="right")
-        if turn:
-            high[around_origin] = low[around_origin]
-        else:
-            low[around_origin], high[around_origin] = 0, len(beam_angle)
-        counts = high - low
-        counts[skipped] = 0
-        puff_of.append(np.arange(len(counts)).repeat(counts))
-        beams.append((low + counts - counts.cumsum()).repeat(counts) + np.arange(len(puff_of[-1])))
-    if len(beams) == 1:
-        return beams[0], puff_of[0]
-    return np.concatenate(beams), np.concatenate(puff_of)
-
-
-_TINIEST = np.nextafter(0.0, 1.0)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a × b of two 3-vectors (np.cross costs more in its set-up than in this arithmetic)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-def _dot(vectors: np.ndarray, axis: np.ndarray) -> np.ndarray:
-    """(N, 3) · (3,) without BLAS (whose threads cost more than this work on small arrays)."""
-    return vectors[:, 0] * axis[0] + vectors[:, 1] * axis[1] + vectors[:, 2] * axis[2]
-
-
-@dataclass(frozen=True)
-class _Segments:
-    """What crossing puffs needs of fixed beam segments: the corners of the box bounding them, and their fan if any."""
-
-    lower: np.ndarray
-    upper: np.ndarray
-    fan: _Fan | None
-
-
-_SEGMENTS = KeptPerArrays()
-
-
-def _segments_of(origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray) -> _Segments:
-    """Kept for a sensor's read-only beam arrays: one look-up a scan."""
-    return _SEGMENTS.get((origins, directions, beam_end_m), None, lambda: _Segments(*_segments_box(origins, directions, beam_end_m), _fan_of(origins, directions)))
-
-
-def _far_from(segments: _Segments, puffs: Puffs) -> np.ndarray:
-    """Which puffs are out of reach of the box bounding all beam segments (a cheap first cut)."""
-    reach = REACH_SIGMAS * puffs.sigma[:, None]
-    return np.logical_or.reduce((puffs.centers + reach < segments.lower) | (puffs.centers - reach > segments.upper), axis=1)
-
-
-def _segments_box(origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Lower and upper corner of the box bounding all beam segments (an infinite beam counts to its origin)."""
-    ends = origins + directions * np.where(np.isfinite(beam_end_m), beam_end_m, 0.0)[:, None]
-    return np.minimum(origins.min(axis=0), ends.min(axis=0)), np.maximum(origins.max(axis=0), ends.max(axis=0))
