@@ -11,14 +11,11 @@ import argparse
 import asyncio
 import signal
 import sys
-from typing import Mapping, Sequence
 
 from emulator.commands.options import add_scene_options, scene_from_args
 from emulator.daemon.clock import WallClock
 from emulator.daemon.service import Daemon, Ready
 from emulator.errors import UserError
-from emulator.scene import Scene
-from emulator.scene.endpoints import EndpointClaims, parse_endpoint
 
 SWITCH_INTERVAL_S = 0.0005
 
@@ -46,29 +43,11 @@ def endpoint_overrides(items: list[str]) -> dict[str, list[str]]:
     return overrides
 
 
-def refuse_clashing_endpoints(scene: Scene, overrides: Mapping[str, Sequence[str]]) -> None:
-    """The scene's endpoints never clash (the loader refuses it), but `--endpoint` can
-    bring one onto a port or path another sensor keeps: refuse it before anything is
-    served, by the rule the loader uses (a wildcard host owns its port on every address)."""
-    claims = EndpointClaims()
-    for spec in scene.sensors:
-        for uri in overrides.get(spec.name, spec.endpoints):
-            address = parse_endpoint(uri)
-            clash = claims.claim(address, spec.name)
-            if clash is not None:
-                taken, owner = clash
-                spelled = "" if taken == address else f" as {taken}"
-                raise UserError(
-                    f"--endpoint: endpoint {address} of sensor {spec.name!r} already used by sensor {owner!r}{spelled}"
-                )
-
-
 def run(args: argparse.Namespace) -> int:
     if not args.speed > 0:
         raise UserError(f"--speed must be > 0, got {args.speed}")
     overrides = endpoint_overrides(args.endpoint)
     scene = scene_from_args(args)
-    refuse_clashing_endpoints(scene, overrides)
     daemon = Daemon(scene, overrides, WallClock(args.speed))
     serve_until_signalled(daemon)
     return 0

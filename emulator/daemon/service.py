@@ -32,7 +32,7 @@ from emulator.daemon.scan_cache import (
 )
 from emulator.errors import UserError
 from emulator.optics import World
-from emulator.scene.endpoints import Address, EndpointClaims, PtyAddress, parse_endpoint
+from emulator.scene.endpoints import Address, PtyAddress, plan_endpoints
 from emulator.scene.model import Scene, SensorSpec
 from emulator.sensors import create_sensor
 from emulator.sensors.scan import Scan
@@ -163,28 +163,6 @@ class DeviceSession:
                 self._prefetch_timer = self._call_later(lead, self._prefetch, deadline)
 
 
-def _plan(
-    scene: Scene, endpoints_override: Mapping[str, Sequence[str]] | None
-) -> list[tuple[SensorSpec, tuple[Address, ...]]]:
-    """Each sensor with the endpoints it is served on; UserError for unknown sensors or bad URIs."""
-    overrides = dict(endpoints_override or {})
-    known = {spec.name for spec in scene.sensors}
-    for name in overrides:
-        if name not in known:
-            raise UserError(f"--endpoint: no sensor named {name!r} (known: {', '.join(sorted(known)) or 'none'})")
-    plan = []
-    claims = EndpointClaims()
-    for spec in scene.sensors:
-        addresses = tuple(parse_endpoint(uri) for uri in overrides.get(spec.name, spec.endpoints))
-        for address in addresses:
-            clash = claims.claim(address, spec.name)
-            if clash is not None:
-                raise UserError(f"endpoint {address} given twice (sensors {clash[1]!r} and {spec.name!r})")
-        if addresses:
-            plan.append((spec, addresses))
-    return plan
-
-
 class Daemon:
     """Serves `scene`'s sensors. `endpoints_override` maps a sensor name to the
     URIs that replace its scene endpoints; `sensor_factory` supplies scan sources
@@ -203,7 +181,7 @@ class Daemon:
         self.clock = clock or WallClock()
         self.sessions: list[DeviceSession] = []
         self.endpoints: list[PtyEndpoint | TcpEndpoint] = []
-        self._plan = _plan(scene, endpoints_override)
+        self._plan = plan_endpoints(scene, endpoints_override)
         self._sensor_factory = sensor_factory
         self._device_factory = device_factory
         self._scan_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="scan")

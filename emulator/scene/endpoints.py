@@ -9,9 +9,10 @@ from __future__ import annotations
 import ipaddress
 import os
 from dataclasses import dataclass
-from typing import Union
+from typing import Mapping, Sequence, Union
 
 from emulator.errors import UserError
+from emulator.scene.model import Scene, SensorSpec
 
 WILDCARD = "*"  # a bind to 0.0.0.0 or :: owns its port on every address (Linux)
 HOST_ALIASES = {"localhost": "127.0.0.1"}
@@ -97,3 +98,31 @@ class EndpointClaims:
         if clash is None:
             self._taken.append((address, owner))
         return clash
+
+
+def plan_endpoints(
+    scene: Scene, overrides: Mapping[str, Sequence[str]] | None = None
+) -> list[tuple[SensorSpec, tuple[Address, ...]]]:
+    """Each sensor with the endpoints it is served on. The scene's own never clash (the
+    loader refuses it), but `--endpoint` can name an unknown sensor, a bad URI, or bring
+    one onto a port or path another endpoint keeps: a UserError before anything is served."""
+    overrides = dict(overrides or {})
+    known = {spec.name for spec in scene.sensors}
+    for name in overrides:
+        if name not in known:
+            raise UserError(f"--endpoint: no sensor named {name!r} (known: {', '.join(sorted(known)) or 'none'})")
+    plan = []
+    claims = EndpointClaims()
+    for spec in scene.sensors:
+        addresses = tuple(parse_endpoint(uri) for uri in overrides.get(spec.name, spec.endpoints))
+        for address in addresses:
+            clash = claims.claim(address, spec.name)
+            if clash is not None:
+                taken, owner = clash
+                spelled = "" if taken == address else f" as {taken}"
+                raise UserError(
+                    f"--endpoint: endpoint {address} of sensor {spec.name!r} already used by sensor {owner!r}{spelled}"
+                )
+        if addresses:
+            plan.append((spec, addresses))
+    return plan

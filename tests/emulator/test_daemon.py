@@ -146,9 +146,9 @@ def test_plan_errors_name_what_is_wrong(tmp_path: Path, monkeypatch: pytest.Monk
     with pytest.raises(UserError, match=r"no sensor named 'lms' \(known: second, urg\)"):
         Daemon(scene, {"lms": ["tcp:127.0.0.1:0"]})
     monkeypatch.chdir(tmp_path)
-    with pytest.raises(UserError, match="given twice"):
+    with pytest.raises(UserError, match="already used by sensor"):
         Daemon(scene, {"urg": ["pty:ttyA"], "second": [f"pty:{tmp_path / 'ttyA'}"]})
-    with pytest.raises(UserError, match="given twice"):
+    with pytest.raises(UserError, match="already used by sensor"):
         Daemon(scene, {"urg": ["tcp:127.0.0.1:10940", "tcp:127.0.0.1:10940"]})
     Daemon(scene, {"urg": ["tcp:127.0.0.1:0", "tcp:127.0.0.1:0"]})  # two fresh ports are two endpoints
 

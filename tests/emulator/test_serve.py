@@ -15,9 +15,9 @@ import pytest
 import serial
 
 from emulator.bench.serve_process import ServeProcess, free_tcp_port, serve_command
-from emulator.commands.serve import refuse_clashing_endpoints
 from emulator.errors import UserError
 from emulator.scene import load_scene
+from emulator.scene.endpoints import plan_endpoints
 from protocols.lms2xx import build_telegram
 
 MD_FULL = b"MD0044072501000"  # urg_library: steps 44..725, cluster 1, every scan, unlimited
@@ -217,12 +217,12 @@ def test_an_override_onto_a_wildcard_of_a_port_another_sensor_keeps_is_refused_b
 )
 def test_clashing_overrides_are_one_user_error(overrides: dict[str, list[str]], expected: str) -> None:
     with pytest.raises(UserError) as raised:
-        refuse_clashing_endpoints(load_scene("railway"), overrides)
+        plan_endpoints(load_scene("railway"), overrides)
     assert str(raised.value) == f"--endpoint: {expected}"
 
 
 def test_overrides_on_distinct_hosts_or_fresh_ports_are_accepted() -> None:
-    refuse_clashing_endpoints(
+    plan_endpoints(
         load_scene("railway"),
         {
             "urg": ["tcp:127.0.0.2:10940", "tcp:0.0.0.0:0", "tcp:127.0.0.1:0"],
