@@ -1,6 +1,6 @@
 """`lrf-emulator record SCENE --sensor NAME --start T0 --end T1 --out FILE` (CLI.md).
 
-Writes one log line per scan (emulator/logfile.py) at the sensor's scan
+Writes one log line per scan (emulator/recording/textlog.py) at the sensor's scan
 period, as the scene configures it (`configured_scan`, `configured_period_s`):
 the URG-04LX every 0.1 s; the LMS200 every full scan of its resolution, i.e.
 the mirror revolutions that scan needs (1°: 1/75 s, 0.5°: 2/75 s,

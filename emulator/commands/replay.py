@@ -2,7 +2,7 @@
 
 Serves a recorded log (from `record`, or a real sensor's log in the same
 format) through the real protocol on the daemon, at the log's recorded rate,
-looping at its end (emulator/replay.py). The served sensor is named after the
+looping at its end (emulator/recording/replay_sources.py). The served sensor is named after the
 log's header (default `urg` / `lms`). Endpoints as for `serve`: `pty:PATH` or
 `tcp:HOST:PORT`; defaults: URG-04LX tcp:127.0.0.1:10940, LMS200 pty:ttyLMS0.
 An LMS200 starts in the angle, resolution and unit of the log.
