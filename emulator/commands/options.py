@@ -1,9 +1,10 @@
-"""Arguments several subcommands share: the scene, its seed and its smoke preset."""
+"""Arguments several subcommands share: the scene, its seed and its smoke preset; a sensor's time span."""
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+from pathlib import Path
 
 from emulator.scene import Scene, load_scene
 from emulator.sensors.response import apply_model_override
@@ -30,3 +31,11 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
     if getattr(args, "seed", None) is not None:
         scene = dataclasses.replace(scene, seed=args.seed)
     return scene
+
+
+def add_span_options(parser: argparse.ArgumentParser, *, verb: str, out_metavar: str, out_help: str) -> None:
+    """`--sensor NAME --start T0 --end T1 --out FILE`: one sensor's scans over a span of simulated time."""
+    parser.add_argument("--sensor", required=True, metavar="NAME", help=f"the scene's sensor to {verb}")
+    parser.add_argument("--start", type=float, default=0.0, metavar="T0", help="first simulated time (s)")
+    parser.add_argument("--end", type=float, required=True, metavar="T1", help="last simulated time (s)")
+    parser.add_argument("--out", required=True, type=Path, metavar=out_metavar, help=out_help)

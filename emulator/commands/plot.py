@@ -10,9 +10,8 @@ plume for scenes with plumes). Needs matplotlib (`pip install '.[plot]'`).
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from emulator.commands.options import add_scene_options, scene_from_args
+from emulator.commands.options import add_scene_options, add_span_options, scene_from_args
 from emulator.errors import UserError
 from emulator.plots.waterfall import draw_waterfall, pyplot, sensor_series
 
@@ -21,10 +20,7 @@ MAX_PIXELS = 8000
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_scene_options(parser, seed=False)
-    parser.add_argument("--sensor", required=True, metavar="NAME", help="the scene's sensor to plot")
-    parser.add_argument("--start", type=float, default=0.0, metavar="T0", help="first simulated time (s)")
-    parser.add_argument("--end", type=float, required=True, metavar="T1", help="last simulated time (s)")
-    parser.add_argument("--out", required=True, type=Path, metavar="FILE.png", help="PNG file to write")
+    add_span_options(parser, verb="plot", out_metavar="FILE.png", out_help="PNG file to write")
     parser.add_argument("--width", type=int, default=1200, metavar="PX", help="image width in pixels")
     parser.add_argument("--height", type=int, default=800, metavar="PX", help="image height in pixels")
 

@@ -12,9 +12,8 @@ from __future__ import annotations
 
 import argparse
 import itertools
-from pathlib import Path
 
-from emulator.commands.options import add_scene_options, scene_from_args
+from emulator.commands.options import add_scene_options, add_span_options, scene_from_args
 from emulator.errors import UserError
 from emulator.recording.textlog import LogHeader, write_log
 from emulator.sensors import create_sensor
@@ -23,10 +22,7 @@ from emulator.sensors.series import scan_series, scan_times
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_scene_options(parser, seed=False)
-    parser.add_argument("--sensor", required=True, metavar="NAME", help="the scene's sensor to record")
-    parser.add_argument("--start", type=float, default=0.0, metavar="T0", help="first simulated time (s)")
-    parser.add_argument("--end", type=float, required=True, metavar="T1", help="last simulated time (s)")
-    parser.add_argument("--out", required=True, type=Path, metavar="FILE", help="log file to write")
+    add_span_options(parser, verb="record", out_metavar="FILE", out_help="log file to write")
 
 
 def run(args: argparse.Namespace) -> int:
