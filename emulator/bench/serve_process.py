@@ -43,9 +43,9 @@ class ReadyEndpoint:
 
     @property
     def address(self) -> tuple[str, int]:
-        """(host, port) of a TCP endpoint."""
+        """(host, port) of a TCP or RFC 2217 endpoint."""
         scheme, host, port = self.uri.split(":")
-        if scheme != "tcp":
+        if scheme not in ("tcp", "rfc2217"):
             raise ValueError(f"not a TCP endpoint: {self.uri}")
         return host, int(port)
 

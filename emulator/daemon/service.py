@@ -182,6 +182,7 @@ class Daemon:
         self.sessions: list[DeviceSession] = []
         self.endpoints: list[PtyEndpoint | TcpEndpoint] = []
         self._plan = plan_endpoints(scene, endpoints_override)
+        self._overridden = frozenset(endpoints_override or ())
         self._sensor_factory = sensor_factory
         self._device_factory = device_factory
         self._scan_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="scan")
@@ -189,18 +190,35 @@ class Daemon:
         self._stopped = asyncio.Event()  # set by stop(), even before run() has begun
 
     def start(self, loop: asyncio.AbstractEventLoop, on_ready: Callable[[Ready], None]) -> None:
-        """Open every endpoint, calling `on_ready` as each one serves."""
+        """Bind every endpoint, then call `on_ready` for each: a client reading the
+        `ready` lines never finds one endpoint serving while a later one fails.
+        If one cannot be bound, those already bound are closed and a UserError
+        names it and where it was asked for."""
         factory = self._sensor_factory or simulated_sensors(self.scene)
         self._timer = PreciseTimer(loop)
+        readies = []
         for spec, addresses in self._plan:
             scans = ScanCache(factory(spec), self._scan_thread)
-            for address in addresses:
+            for position, address in enumerate(addresses):
                 device = self._device_factory(spec, scans)
                 session = DeviceSession(device, self.clock, loop, scans.prefetch, self._timer.call_later)
-                ready = self._open(spec, address, session, loop)
+                try:
+                    readies.append(self._open(spec, address, session, loop))
+                except UserError as error:
+                    self.close()
+                    raise UserError(f"{self._origin(spec, position)}: {error}") from None
                 self.sessions.append(session)
-                session.start()
-                on_ready(ready)
+        for session in self.sessions:
+            session.start()
+        for ready in readies:
+            on_ready(ready)
+
+    def _origin(self, spec: SensorSpec, position: int) -> str:
+        """Where an endpoint was asked for: `--endpoint urg` or `x.toml: sensors[0].endpoints[1]`."""
+        if spec.name in self._overridden:
+            return f"--endpoint {spec.name}"
+        scene_file = self.scene.path.name if self.scene.path is not None else "scene"
+        return f"{scene_file}: sensors[{self.scene.sensors.index(spec)}].endpoints[{position}]"
 
     def _open(
         self, spec: SensorSpec, address: Address, session: DeviceSession, loop: asyncio.AbstractEventLoop

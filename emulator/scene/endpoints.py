@@ -1,4 +1,4 @@
-"""Endpoint URIs of the scene format (`pty:PATH`, `tcp:HOST:PORT`) and the clash rule.
+"""Endpoint URIs of the scene format (`pty:PATH`, `tcp:HOST:PORT`, `rfc2217:HOST:PORT`) and the clash rule.
 
 They are scene data: the loader validates them, `serve --endpoint` parses the
 same syntax, and the transports bind what they describe.
@@ -40,23 +40,36 @@ class TcpAddress:
         return f"tcp:{host}:{self.port}"
 
 
-Address = Union[PtyAddress, TcpAddress]
+@dataclass(frozen=True)
+class Rfc2217Address(TcpAddress):
+    """`rfc2217:HOST:PORT`: a TCP port speaking RFC 2217 (serial over telnet, with
+    line control), so a client sets the baud over the network as on a serial port.
+    It takes a TCP port like `tcp:`, so the two clash on one port."""
+
+    def __str__(self) -> str:
+        return "rfc2217:" + super().__str__().removeprefix("tcp:")
+
+
+Address = Union[PtyAddress, TcpAddress, Rfc2217Address]
+EXPECTED = "pty:PATH, tcp:HOST:PORT or rfc2217:HOST:PORT with PORT 0..65535"
 
 
 def parse_endpoint(uri: str) -> Address:
-    """`pty:PATH` or `tcp:HOST:PORT` (IPv6 hosts in brackets); UserError otherwise."""
+    """`pty:PATH`, `tcp:HOST:PORT` or `rfc2217:HOST:PORT` (IPv6 hosts in brackets;
+    port 0: the system chooses, in a scene file as on `--endpoint`); UserError otherwise."""
     scheme, sep, rest = uri.partition(":")
     if sep and scheme == "pty":
         if not rest:
             raise UserError(f"endpoint {uri!r}: pty needs a path (pty:PATH)")
         return PtyAddress(rest)
-    if sep and scheme == "tcp":
+    if sep and scheme in ("tcp", "rfc2217"):
         host, sep, port_text = rest.rpartition(":")
         host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
         if not sep or not host or not port_text.isdigit() or not 0 <= int(port_text) <= 65535:
-            raise UserError(f"endpoint {uri!r}: expected tcp:HOST:PORT with PORT 0..65535")
-        return TcpAddress(host, int(port_text))
-    raise UserError(f"endpoint {uri!r}: expected pty:PATH or tcp:HOST:PORT")
+            raise UserError(f"endpoint {uri!r}: expected {scheme}:HOST:PORT with PORT 0..65535")
+        kind = TcpAddress if scheme == "tcp" else Rfc2217Address
+        return kind(host, int(port_text))
+    raise UserError(f"endpoint {uri!r}: expected {EXPECTED}")
 
 
 def endpoints_clash(first: Address, second: Address) -> bool:

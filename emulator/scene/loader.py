@@ -22,7 +22,9 @@ from types import MappingProxyType
 from typing import Any, Iterable, Mapping, Sequence
 
 from emulator.errors import SceneError, UserError
-from emulator.scene.endpoints import Address, EndpointClaims, TcpAddress, parse_endpoint
+from emulator.scene.endpoints import Address, EndpointClaims, parse_endpoint
+
+ENDPOINT_SYNTAX = '"pty:PATH", "tcp:HOST:PORT" or "rfc2217:HOST:PORT" with PORT 0..65535'
 from emulator.scene.geometry import MeshLoadError, load_mesh_file
 from emulator.scene.materials import BUILTIN_MATERIALS, DEFAULT_MATERIAL
 from emulator.scene.model import (
@@ -473,14 +475,12 @@ def _plumes(tables: list[_Table]) -> tuple[Plume, ...]:
 
 
 def _endpoint_address(text: str, place: _Place) -> Address:
-    """`pty:PATH` or `tcp:HOST:PORT`, parsed as `serve` will; a scene names a real port (not 0)."""
+    """An endpoint URI parsed as `serve --endpoint` parses it (port 0 included: the
+    system chooses a free port and the `ready` line names it)."""
     try:
-        address = parse_endpoint(text)
+        return parse_endpoint(text)
     except UserError:
-        address = None
-    if address is None or (isinstance(address, TcpAddress) and address.port == 0):
-        raise place.error(f'expected "pty:PATH" or "tcp:HOST:PORT" with PORT 1..65535, got {_show(text)}')
-    return address
+        raise place.error(f"expected {ENDPOINT_SYNTAX}, got {_show(text)}") from None
 
 
 def _endpoints(table: _Table, claims: EndpointClaims, sensor: str) -> tuple[str, ...]:

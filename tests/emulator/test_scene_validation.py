@@ -125,8 +125,9 @@ CASES = [
     (URG + "endpoints = [10940]", "sensors[0].endpoints[0]: expected a string, got 10940"),
     *[
         (URG + f'endpoints = ["pty:ok", "{bad}"]',
-         f'sensors[0].endpoints[1]: expected "pty:PATH" or "tcp:HOST:PORT" with PORT 1..65535, got "{bad}"')
-        for bad in ("serial:/dev/ttyS0", "pty:", "tcp:127.0.0.1", "tcp::10940", "tcp:127.0.0.1:0",
+         f'sensors[0].endpoints[1]: expected "pty:PATH", "tcp:HOST:PORT" or "rfc2217:HOST:PORT" with PORT 0..65535, '
+         f'got "{bad}"')
+        for bad in ("serial:/dev/ttyS0", "pty:", "tcp:127.0.0.1", "tcp::10940", "rfc2217:127.0.0.1",
                     "tcp:127.0.0.1:65536", "tcp:127.0.0.1:http", "tcp:127.0.0.1:-1", "ttyURG0")
     ],
     (URG + 'endpoints = ["tcp:127.0.0.1:10940"]\n' + LMS + 'endpoints = ["tcp:127.0.0.1:10940"]',

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 import serial
 
-from emulator.bench.serve_process import ServeProcess, free_tcp_port, serve_command
+from emulator.bench.serve_process import ServeProcess, free_tcp_port, parse_ready_line, serve_command
 from emulator.errors import UserError
 from emulator.scene import load_scene
 from emulator.scene.endpoints import plan_endpoints
@@ -161,7 +161,7 @@ def test_a_streaming_lms_at_9600_does_not_stall_the_urg(tmp_path: Path) -> None:
     ("arguments", "expected"),
     [
         (["railway", "--endpoint", "nosuch=tcp:127.0.0.1:0"], "no sensor named 'nosuch'"),
-        (["railway", "--endpoint", "urg=udp:127.0.0.1:1"], "expected pty:PATH or tcp:HOST:PORT"),
+        (["railway", "--endpoint", "urg=udp:127.0.0.1:1"], "expected pty:PATH, tcp:HOST:PORT or rfc2217:HOST:PORT"),
         (["railway", "--endpoint", "urg=tcp:127.0.0.1:99999"], "PORT 0..65535"),
         (["railway", "--endpoint", "urg"], "expected SENSOR=URI"),
         (["no-such-scene"], "no-such-scene"),
@@ -175,7 +175,8 @@ def test_user_errors_are_one_line_and_exit_2(tmp_path: Path, arguments: list[str
     assert result.stdout == ""
 
 
-def test_port_in_use_is_a_user_error_and_leaves_no_symlink(tmp_path: Path) -> None:
+def test_port_in_use_is_a_user_error_with_no_ready_line_and_leaves_no_symlink(tmp_path: Path) -> None:
+    """The pty is bound first, the taken port second: neither is announced."""
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
         taken.listen(1)
@@ -185,8 +186,50 @@ def test_port_in_use_is_a_user_error_and_leaves_no_symlink(tmp_path: Path) -> No
             cwd=tmp_path,
         )
     assert result.returncode == 2
-    assert result.stderr == f"lrf-emulator serve: tcp:127.0.0.1:{port}: Address already in use\n"
+    assert result.stderr == f"lrf-emulator serve: --endpoint lms: tcp:127.0.0.1:{port}: Address already in use\n"
+    assert result.stdout == ""
     assert not os.path.lexists(tmp_path / "u")
+
+
+def test_a_taken_port_from_the_scene_file_is_named_by_file_table_and_key(tmp_path: Path) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        port = taken.getsockname()[1]
+        scene = tmp_path / "two.toml"
+        scene.write_text(
+            '[[sensors]]\nname = "urg"\nmodel = "urg-04lx"\nendpoints = ["tcp:127.0.0.1:0"]\n'
+            f'[[sensors]]\nname = "lms"\nmodel = "lms200"\nendpoints = ["pty:l", "tcp:127.0.0.1:{port}"]\n'
+        )
+        result = run_serve(str(scene), cwd=tmp_path)
+    assert result.returncode == 2
+    assert result.stderr == (
+        f"lrf-emulator serve: two.toml: sensors[1].endpoints[1]: tcp:127.0.0.1:{port}: Address already in use\n"
+    )
+    assert result.stdout == ""
+    assert not os.path.lexists(tmp_path / "l")
+
+
+def test_tcp_port_0_in_a_scene_file_means_what_it_means_on_endpoint(tmp_path: Path) -> None:
+    """A free port chosen by the system and named on the ready line, from the scene
+    file as from `--endpoint urg=tcp:127.0.0.1:0`."""
+    scene = tmp_path / "zero.toml"
+    scene.write_text('[[sensors]]\nname = "urg"\nmodel = "urg-04lx"\nendpoints = ["tcp:127.0.0.1:0"]\n')
+    for extra in ([], ["--endpoint", "urg=tcp:127.0.0.1:0"]):
+        process = subprocess.Popen(
+            [*serve_command(), "serve", str(scene), *extra], cwd=tmp_path, stdout=subprocess.PIPE, text=True
+        )
+        try:
+            ready = parse_ready_line(process.stdout.readline())
+            assert ready is not None and ready.sensor == "urg"
+            host, port = ready.address
+            assert host == "127.0.0.1" and port > 0
+            with socket.create_connection((host, port), timeout=5) as client:
+                client.sendall(b"VV\n")
+                assert client.recv(4) == b"VV\n0"
+        finally:
+            process.terminate()
+            process.wait(10)
 
 
 def test_an_override_onto_a_wildcard_of_a_port_another_sensor_keeps_is_refused_before_serving(tmp_path: Path) -> None:
@@ -258,11 +301,8 @@ def test_scene_endpoints_are_served_with_pty_paths_relative_to_the_cwd(tmp_path:
         [*serve_command(), "serve", str(scene)], cwd=workdir, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
     try:
-        lines = []
-        deadline = time.monotonic() + 30
-        while len(lines) < 2 and time.monotonic() < deadline:
-            if select.select([process.stdout], [], [], 0.1)[0]:
-                lines.append(process.stdout.readline())
+        assert select.select([process.stdout], [], [], 30)[0], "no ready line in 30 s"
+        lines = [process.stdout.readline(), process.stdout.readline()]  # printed together, once all are bound
         slave = os.readlink(workdir / "ttyA")
         assert lines == [f"ready urg urg-04lx pty:ttyA -> {slave}\n", f"ready urg urg-04lx tcp:127.0.0.1:{port}\n"]
         with socket.create_connection(("127.0.0.1", port), timeout=2) as client:

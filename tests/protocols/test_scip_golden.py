@@ -1,7 +1,7 @@
 """UrgDevice against the bytes of a real URG-04LX (firmware 3.1.04).
 
-The capture in ../shared/reference is parsed here, not copied: every reply
-below is compared with what the real unit sent.
+The capture (tests/protocols/data, copied from the contract's reference) is
+parsed here: every reply below is compared with what the real unit sent.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from emulator.sensors.scan import Scan
 from protocols.scip import UrgDevice
 from protocols.scip.encoding import checksum, decode_values, join_data_lines
 
-CAPTURE = Path(__file__).resolve().parents[3] / "shared" / "reference" / "urg04lx-real-session.txt"
+CAPTURE = Path(__file__).resolve().parent / "data" / "urg04lx-real-session.txt"
 STEPS = 769
 
 
