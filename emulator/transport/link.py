@@ -16,6 +16,11 @@ from emulator.transport.outbox import DEFAULT_LIMIT_BYTES, Outbox
 from protocols.device import Output
 
 READ_SIZE = 65536
+# Bytes of one client's input handed to its device per loop turn: a 64 KiB
+# write of commands is worked through in slices, with every other client's
+# reads, timers and writes served in between, and no more is read from the
+# client meanwhile (the kernel's buffers push back on it).
+INPUT_SLICE_BYTES = 512
 
 
 class Link:
@@ -26,6 +31,12 @@ class Link:
     (EIO on a pty master, ECONNRESET) means the client is gone. `accepts_input()`
     lets a transport discard bytes (a pty client at the wrong baud).
     `on_lost` runs once when the client goes away; `close()` never calls it.
+
+    Input costs bounded work per loop turn: a read is fed to the session
+    INPUT_SLICE_BYTES at a time, one slice per turn, and the client is not read
+    again until its last read is used up. While more replies wait unread than
+    the outbox holds, input is discarded at no cost beyond counting it, as a
+    device whose receive buffer overflows loses bytes.
     """
 
     def __init__(
@@ -52,6 +63,8 @@ class Link:
         self._pace_timer: asyncio.TimerHandle | None = None
         self._waiting_writable = False
         self._open = True
+        self._unfed = memoryview(b"")  # read but not yet given to the session
+        self._feeding: asyncio.Handle | None = None
         loop.add_reader(fd, self._on_readable)
 
     @property
@@ -71,6 +84,10 @@ class Link:
             return
         self._open = False
         self._loop.remove_reader(self._fd)
+        if self._feeding is not None:
+            self._feeding.cancel()
+            self._feeding = None
+        self._unfed = memoryview(b"")
         if self._waiting_writable:
             self._loop.remove_writer(self._fd)
             self._waiting_writable = False
@@ -94,10 +111,30 @@ class Link:
         if not data:
             self._lost()
             return
-        if self.outbox.pending_bytes > self.outbox.limit_bytes or not self._accepts_input():
+        if not self._accepts_input():
             self.discarded_input += len(data)
             return
-        self._session.received(data)
+        self._unfed = memoryview(data)
+        self._loop.remove_reader(self._fd)
+        self._feed_slice()
+
+    def _feed_slice(self) -> None:
+        """Give the session one slice of what was read; the rest on a later loop turn."""
+        self._feeding = None
+        if not self._open:
+            return
+        piece, self._unfed = self._unfed[:INPUT_SLICE_BYTES], self._unfed[INPUT_SLICE_BYTES:]
+        if self.outbox.pending_bytes > self.outbox.limit_bytes:
+            self.discarded_input += len(piece) + len(self._unfed)
+            self._unfed = memoryview(b"")
+        else:
+            self._session.received(bytes(piece))
+        if not self._open:
+            return
+        if self._unfed:
+            self._feeding = self._loop.call_soon(self._feed_slice)
+        else:
+            self._loop.add_reader(self._fd, self._on_readable)
 
     def _on_writable(self) -> None:
         self._loop.remove_writer(self._fd)
