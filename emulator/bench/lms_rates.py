@@ -14,6 +14,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 from emulator.bench.lms_client import BAUD_COMMANDS, LmsSerialClient, Telegram
 from emulator.bench.serve_process import ServeProcess, private_endpoints
 
@@ -65,6 +67,7 @@ def measure_stream(client: LmsSerialClient, baud: int, resolution_deg: float, du
     client.discard_input()
     span = scans[-1].arrived - scans[0].arrived if len(scans) >= 2 else 0.0
     measured = (len(scans) - 1) / span if span > 0 else 0.0
+    deviation_ms = period_deviation_ms([scan.arrived for scan in scans])
     return {
         "baud": baud,
         "resolution_deg": resolution_deg,
@@ -73,7 +76,19 @@ def measure_stream(client: LmsSerialClient, baud: int, resolution_deg: float, du
         "measured_per_s": measured,
         "limit_per_s": limit,
         "ratio": measured / limit,
+        "period_deviation_p50_ms": deviation_ms[0],
+        "period_deviation_p99_ms": deviation_ms[1],
     }
+
+
+def period_deviation_ms(arrivals: list[float]) -> tuple[float, float]:
+    """p50 and p99 of |telegram period − median period| (ms), periods taken between the
+    arrivals of consecutive telegrams' last bytes; (nan, nan) with fewer than 3 telegrams."""
+    if len(arrivals) < 3:
+        return float("nan"), float("nan")
+    periods = np.diff(arrivals)
+    deviations = np.abs(periods - np.median(periods)) * 1000
+    return float(np.percentile(deviations, 50)), float(np.percentile(deviations, 99))
 
 
 def lms_scan_rates(
@@ -106,12 +121,14 @@ def table_lines(result: dict) -> list[str]:
     """The measurement as a plain-text table for `lrf-emulator bench`."""
     lines = [
         f"LMS200 scans/s through serve over a pty ({result['scene']}, at least {result['duration_s']:g} s each)",
-        f"{'baud':>7} {'res':>5} {'bytes':>5} {'scans':>5} {'measured/s':>10} {'limit/s':>8} {'ratio':>6}",
+        f"{'baud':>7} {'res':>5} {'bytes':>5} {'scans':>5} {'measured/s':>10} {'limit/s':>8} {'ratio':>6}"
+        f" {'period dev p50/p99 ms':>22}",
     ]
     for row in result["rows"]:
         lines.append(
             f"{row['baud']:>7} {row['resolution_deg']:>4g}° {row['telegram_bytes']:>5} {row['scans']:>5} "
             f"{row['measured_per_s']:>10.2f} {row['limit_per_s']:>8.2f} {row['ratio']:>6.3f}"
+            f" {row['period_deviation_p50_ms']:>10.2f} / {row['period_deviation_p99_ms']:<9.2f}"
         )
     return lines
 

@@ -160,7 +160,15 @@ class DeviceSession:
             self._timer = self._call_later(delay, self._wake)
             if self._prefetch is not None:
                 lead = max(0.0, delay - PREFETCH_LEAD_S)
-                self._prefetch_timer = self._call_later(lead, self._prefetch, deadline)
+                self._prefetch_timer = self._call_later(lead, self._prefetch, self._scan_time(deadline))
+
+    def _scan_time(self, deadline: float) -> float:
+        """The scan the device will ask for at `deadline`: the one it names if it can
+        (an LMS200 on a slow line sends the newest scan complete when the line frees),
+        else the deadline itself (a URG's scan times are its deadlines)."""
+        next_scan_time = getattr(self.device, "next_scan_time", None)
+        scan_time = next_scan_time() if next_scan_time is not None else None
+        return deadline if scan_time is None else scan_time
 
 
 class Daemon:

@@ -12,8 +12,11 @@ from dataclasses import dataclass
 from protocols.device import Output
 
 BITS_PER_BYTE = 10  # 8N1: start bit, 8 data bits, stop bit
-PACE_QUANTUM_S = 0.005  # a paced line is fed this far ahead, so bytes leave in ≈ 5 ms chunks
-CATCH_UP_S = 0.02  # a late wake-up may catch up this much; a longer pause means the line idled
+# A paced line is fed this far ahead, so bytes leave in ≈ 8 ms chunks: 24 wake-ups for an
+# LMS200 telegram at 38400 baud, and the client's longest silence inside a telegram (a
+# chunk plus a late wake-up) stays under the LMS200's 14 ms inter-byte gap limit.
+PACE_QUANTUM_S = 0.008
+CATCH_UP_S = 0.02  # a late wake-up inside an output may catch up this much
 DEFAULT_LIMIT_BYTES = 16 * 1024
 
 
@@ -85,7 +88,10 @@ class Outbox:
             return bytes(remaining), None
         if self._line_free_at > now:
             return b"", self._line_free_at
-        if self._line_free_at < now - CATCH_UP_S:
+        if head.sent == 0 or self._line_free_at < now - CATCH_UP_S:
+            # The line is idle: an output starting now earns no credit for the past (else a
+            # telegram following a short gap leaves in one burst and the next is paced: the
+            # telegram period alternates). Only a late wake-up inside an output catches up.
             self._line_free_at = now
         allowed = int((now + PACE_QUANTUM_S - self._line_free_at) * baud / BITS_PER_BYTE)
         return bytes(remaining[: max(1, allowed)]), None

@@ -1,21 +1,52 @@
-"""Sub-millisecond timers for an asyncio loop.
+"""Sub-millisecond timers for an asyncio loop, on a Linux timerfd.
 
 asyncio sleeps in epoll_wait, whose timeout is whole milliseconds, rounded
 up: on this machine its timers fire 0.2–3.5 ms late, more than the 2 ms
-scan-period jitter budget. A `PreciseTimer` thread sleeps on a condition
-variable (accurate to ≈ 0.1 ms) and hands each due callback to the loop with
-`call_soon_threadsafe`, which wakes the loop at once. Callbacks run on the
-loop thread, as with `loop.call_at`.
+scan-period jitter budget. A `PreciseTimer` arms one timerfd (nanosecond
+expiry on CLOCK_MONOTONIC, the clock of `time.monotonic()` and the loop) for
+its earliest callback and registers it with the loop as a reader: the loop
+wakes from epoll when the kernel's high-resolution timer expires and runs
+every due callback on the loop thread, as `loop.call_at` would. An earlier
+version slept on a condition variable in a helper thread and handed callbacks
+over with `call_soon_threadsafe`; that cost ≈ 90 µs of CPU per wake-up (thread
+switch, GIL hand-off, self-pipe), the timerfd a few µs.
 """
 
 from __future__ import annotations
 
 import asyncio
+import ctypes
+import ctypes.util
 import heapq
 import itertools
-import threading
+import os
 import time
 from typing import Any, Callable
+
+_CLOCK_MONOTONIC = 1
+_TFD_NONBLOCK = os.O_NONBLOCK
+_TFD_CLOEXEC = os.O_CLOEXEC
+_TFD_TIMER_ABSTIME = 1
+
+
+class _Timespec(ctypes.Structure):
+    _fields_ = [("tv_sec", ctypes.c_long), ("tv_nsec", ctypes.c_long)]
+
+
+class _Itimerspec(ctypes.Structure):
+    _fields_ = [("it_interval", _Timespec), ("it_value", _Timespec)]
+
+
+_libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+_libc.timerfd_create.argtypes = (ctypes.c_int, ctypes.c_int)
+_libc.timerfd_settime.argtypes = (ctypes.c_int, ctypes.c_int, ctypes.POINTER(_Itimerspec), ctypes.c_void_p)
+
+
+def _check(result: int) -> int:
+    if result < 0:
+        errno = ctypes.get_errno()
+        raise OSError(errno, os.strerror(errno))
+    return result
 
 
 class TimerHandle:
@@ -37,49 +68,58 @@ class TimerHandle:
 
 
 class PreciseTimer:
-    """`call_at` / `call_later` on `time.monotonic()` (the loop's own clock)."""
+    """`call_at` / `call_later` on `time.monotonic()` (the loop's own clock).
+    Create and use it on the loop's thread."""
 
     def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
         self._loop = loop
         self._heap: list[tuple[float, int, TimerHandle]] = []
         self._order = itertools.count()
-        self._condition = threading.Condition()
-        self._closed = False
-        self._thread = threading.Thread(target=self._run, name="precise-timer", daemon=True)
-        self._thread.start()
+        self._armed_at: float | None = None
+        self._spec = _Itimerspec()
+        self._fd = _check(_libc.timerfd_create(_CLOCK_MONOTONIC, _TFD_NONBLOCK | _TFD_CLOEXEC))
+        loop.add_reader(self._fd, self._on_expiry)
 
     def call_at(self, when: float, callback: Callable[..., Any], *args: Any) -> TimerHandle:
         handle = TimerHandle(when, callback, args)
-        with self._condition:
-            heapq.heappush(self._heap, (when, next(self._order), handle))
-            if self._heap[0][2] is handle:
-                self._condition.notify()
+        heapq.heappush(self._heap, (when, next(self._order), handle))
+        if self._armed_at is None or when < self._armed_at:
+            self._arm(when)
         return handle
 
     def call_later(self, delay: float, callback: Callable[..., Any], *args: Any) -> TimerHandle:
         return self.call_at(time.monotonic() + delay, callback, *args)
 
     def close(self) -> None:
-        with self._condition:
-            self._closed = True
-            self._heap.clear()
-            self._condition.notify()
-        self._thread.join()
+        if self._fd < 0:
+            return
+        self._heap.clear()
+        self._loop.remove_reader(self._fd)
+        os.close(self._fd)
+        self._fd = -1
 
-    def _run(self) -> None:
-        with self._condition:
-            while not self._closed:
-                while self._heap and self._heap[0][2].cancelled:
-                    heapq.heappop(self._heap)
-                if not self._heap:
-                    self._condition.wait()
-                    continue
-                remaining = self._heap[0][0] - time.monotonic()
-                if remaining > 0:
-                    self._condition.wait(remaining)
-                    continue
-                handle = heapq.heappop(self._heap)[2]
-                try:
-                    self._loop.call_soon_threadsafe(handle._run)
-                except RuntimeError:  # the loop was closed under us
-                    return
+    def _arm(self, when: float) -> None:
+        """Expire at monotonic time `when` (at once if that has passed)."""
+        when = max(when, 1e-9)  # an all-zero it_value would disarm the timer
+        seconds = int(when)
+        self._spec.it_value.tv_sec = seconds
+        self._spec.it_value.tv_nsec = min(999_999_999, max(1, int((when - seconds) * 1e9)))
+        _check(_libc.timerfd_settime(self._fd, _TFD_TIMER_ABSTIME, ctypes.byref(self._spec), None))
+        self._armed_at = when
+
+    def _on_expiry(self) -> None:
+        try:
+            os.read(self._fd, 8)
+        except BlockingIOError:
+            pass
+        self._armed_at = None
+        now = time.monotonic()
+        heap = self._heap
+        try:
+            while heap and (heap[0][2].cancelled or heap[0][0] <= now):
+                heapq.heappop(heap)[2]._run()  # may schedule more (arming if earlier)
+        finally:  # a callback that raised must not leave the rest unscheduled
+            while heap and heap[0][2].cancelled:
+                heapq.heappop(heap)
+            if heap and self._fd >= 0 and (self._armed_at is None or heap[0][0] < self._armed_at):
+                self._arm(heap[0][0])

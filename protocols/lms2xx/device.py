@@ -203,6 +203,16 @@ class Lms200Device:
         due = [time for time in candidates if time is not None]
         return min(due) if due else None
 
+    def next_scan_time(self) -> float | None:
+        """Simulated time of the scan the next streamed telegram will carry (None when not
+        streaming): the newest scan complete when the line frees, so a daemon can compute
+        it ahead. At a slow baud that is not the line-free time `next_deadline` gives."""
+        due = self._stream_due()
+        if self._stream is None or due is None:
+            return None
+        index = max(self._stream.next_index, latest_complete(due, self._stream.revolutions))
+        return completion_time(index, self._stream.revolutions)
+
     def connection_lost(self) -> None:
         """The host went away: stop streaming, back to mode 25. The line rate stays
         (a real unit does not notice a host disconnect)."""

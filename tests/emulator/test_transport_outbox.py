@@ -75,6 +75,37 @@ def test_an_idle_line_gives_no_credit_for_the_past() -> None:
     assert abs(end - 10.1) <= PACE_QUANTUM_S + 1e-9
 
 
+def telegram_end_times(period_s: float, size: int, baud: int, count: int, lateness_s: float) -> list[float]:
+    """When the last byte of each of `count` telegrams leaves, one telegram put every
+    `period_s` (as a streaming LMS200 makes them), the link waking `lateness_s` late."""
+    outbox = Outbox()
+    ends = []
+    for index in range(count):
+        now = index * period_s + lateness_s
+        outbox.put(Output(b"T" * size, baud=baud, droppable=True))
+        while outbox:
+            data, wake_at = outbox.chunk(now)
+            if data:
+                outbox.consume(len(data))
+                if not outbox:
+                    ends.append(now + len(data) * BITS_PER_BYTE / baud)
+            else:
+                assert wake_at is not None
+                now = wake_at + lateness_s
+    return ends
+
+
+@given(st.floats(0.0, 0.003))
+def test_a_telegram_after_a_short_idle_gap_is_paced_like_every_other(lateness_s: float) -> None:
+    """LMS200 at 500 kBd: 732-byte telegrams (14.6 ms) every 26.7 ms leave a 12 ms idle
+    gap. Credit for that gap would send every other telegram in one burst (periods
+    alternating 16/37 ms); without it every telegram takes the same course."""
+    period = 2 / 75
+    ends = telegram_end_times(period, 732, 500_000, 12, lateness_s)
+    deviations = [abs(later - earlier - period) for earlier, later in zip(ends, ends[1:])]
+    assert max(deviations) < 1e-6, deviations
+
+
 def test_a_full_outbox_drops_whole_scans_oldest_first_and_keeps_replies() -> None:
     outbox = Outbox(limit_bytes=1000)
     outbox.put(Output(b"R" * 600))

@@ -58,3 +58,28 @@ def test_500k_carries_every_scan(resolution_deg: float) -> None:
     revolutions = [int(np.frombuffer(data[7:9], dtype="<u2")[0]) for _, data in scans]
     step = round(1 / resolution_deg)
     assert np.all(np.diff(revolutions) == step)  # no scan skipped
+
+
+@pytest.mark.parametrize("resolution_deg", [0.5, 1.0])
+@pytest.mark.parametrize("baud", [9600, 38400, 500_000])
+def test_next_scan_time_names_the_scan_the_next_telegram_carries(baud: int, resolution_deg: float) -> None:
+    """A daemon computes that scan ahead: on a slow line it is the newest scan complete
+    when the line frees, not the line-free time the deadline gives."""
+    asked: list[float] = []
+
+    def recording(time_s: float, **request):
+        asked.append(time_s)
+        return source(time_s, **request)
+
+    device = Lms200Device(recording)
+    device.poll(0.0)
+    device.receive(build_telegram(0, BAUD_COMMANDS[baud]), 0.1)
+    device.receive(build_telegram(0, VARIANT_COMMANDS[resolution_deg]), 0.2)
+    device.receive(build_telegram(0, b"\x20\x24"), 0.3)
+    foreseen, missed = [], 0
+    while (deadline := device.next_deadline()) is not None and deadline <= 0.3 + SIMULATED_S:
+        foreseen.append(device.next_scan_time())
+        asked.clear()
+        device.poll(deadline)
+        missed += asked != [foreseen[-1]]
+    assert len(foreseen) > 10 and missed == 0, (missed, len(foreseen))
