@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import queue
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -58,13 +57,6 @@ def parse_ready_line(line: str) -> ReadyEndpoint | None:
     if len(words) == 6 and words[0] == "ready" and words[4] == "->":
         return ReadyEndpoint(words[1], words[2], words[3], words[5])
     return None
-
-
-def free_tcp_port(host: str = "127.0.0.1") -> int:
-    """A port nothing listens on right now (the OS picks it)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
-        probe.bind((host, 0))
-        return probe.getsockname()[1]
 
 
 def private_endpoints(scene: str | Path, folder: Path) -> list[str]:

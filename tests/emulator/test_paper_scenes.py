@@ -8,14 +8,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support.ports import free_tcp_port
 
-from emulator.validation import report as validation
-from emulator.bench.serve_process import ServeProcess, free_tcp_port
+from emulator.bench.serve_process import ServeProcess
 from emulator.optics import World
 from emulator.plots.waterfall import saturation
 from emulator.scene import bundled_scenes, load_scene
 from emulator.scene.plumes import particles_at
 from emulator.sensors import create_sensor
+from emulator.validation import report as validation
 from emulator.validation.report import keyframe_crossings, machine_on_intervals
 
 PENETRATION_POWER = 0.007  # d·m, paper eq. 1

@@ -13,8 +13,9 @@ from pathlib import Path
 
 import pytest
 import serial
+from support.ports import free_tcp_port
 
-from emulator.bench.serve_process import ServeProcess, free_tcp_port, parse_ready_line, serve_command
+from emulator.bench.serve_process import ServeProcess, parse_ready_line, serve_command
 from emulator.errors import UserError
 from emulator.scene import load_scene
 from emulator.scene.endpoints import plan_endpoints

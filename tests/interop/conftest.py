@@ -12,9 +12,10 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-from interop_support import write_room
+from support.interop import write_room
+from support.ports import free_tcp_port
 
-from emulator.bench.serve_process import ServeProcess, free_tcp_port
+from emulator.bench.serve_process import ServeProcess
 
 
 @pytest.fixture

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from hokuyolx import HokuyoLX
 from hokuyolx.exceptions import HokuyoStatusException
-from interop_support import urg_step_values
+from support.interop import urg_step_values
 
 STEPS = 725 - 44 + 1  # 682
 

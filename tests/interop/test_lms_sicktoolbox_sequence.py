@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from interop_support import scan_values
+from support.interop import scan_values
 
 from emulator.bench.lms_client import ACK, LmsSerialClient, Telegram
 

@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from interop_support import require_program, scan_values, urg_step_values
+from support.interop import require_program, scan_values, urg_step_values
+from support.ports import free_tcp_port
 
 from emulator.bench.lms_rates import line_rate_limit
-from emulator.bench.serve_process import free_tcp_port
 
 MRPT_HINT = "apt-get install mrpt-apps (.ci/run installs it)"
 

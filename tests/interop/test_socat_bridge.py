@@ -15,10 +15,10 @@ from pathlib import Path
 
 import pytest
 import serial
-from interop_support import require_program
+from support.interop import require_program
+from support.ports import free_tcp_port
 
 from emulator.bench.lms_client import ACK, LmsSerialClient, Telegram
-from emulator.bench.serve_process import free_tcp_port
 
 
 @pytest.fixture
