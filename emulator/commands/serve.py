@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import os
 import signal
 import sys
 
@@ -16,6 +17,7 @@ from emulator.commands.options import add_scene_options, scene_from_args
 from emulator.daemon.clock import WallClock
 from emulator.daemon.service import Daemon, Ready
 from emulator.errors import UserError
+from emulator.scene import Scene
 
 SWITCH_INTERVAL_S = 0.0005
 
@@ -30,6 +32,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="serve SENSOR on URI (pty:PATH or tcp:HOST:PORT) instead of its scene endpoints; repeatable",
     )
     parser.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
+    parser.add_argument(
+        "--sensors",
+        metavar="NAME[,NAME...]",
+        help="serve only these sensors of the scene (a fleet: each daemon serves a group)",
+    )
+    parser.add_argument(
+        "--epoch",
+        type=float,
+        metavar="UNIX_TIME",
+        help="simulated time = (now − UNIX_TIME) × speed, so daemons given one epoch agree (default: start at 0)",
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="worker processes computing scans (default: one per core, at most one per sensor; 0: in-process)",
+    )
 
 
 def endpoint_overrides(items: list[str]) -> dict[str, list[str]]:
@@ -48,9 +67,32 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--speed must be > 0, got {args.speed}")
     overrides = endpoint_overrides(args.endpoint)
     scene = scene_from_args(args)
-    daemon = Daemon(scene, overrides, WallClock(args.speed))
+    sensors = served_sensors(scene, args.sensors)
+    if args.workers is not None and args.workers < 0:
+        raise UserError(f"--workers must be >= 0, got {args.workers}")
+    workers = args.workers if args.workers is not None else os.cpu_count() or 1
+    try:
+        clock = WallClock.from_epoch(args.epoch, args.speed) if args.epoch is not None else WallClock(args.speed)
+    except ValueError as error:
+        raise UserError(f"--epoch: {error}") from None
+    for name in overrides:
+        if sensors is not None and name in {spec.name for spec in scene.sensors} and name not in sensors:
+            raise UserError(f"--endpoint {name}=...: sensor {name!r} is not among --sensors {args.sensors}")
+    daemon = Daemon(scene, overrides, clock, sensors=sensors, workers=workers)
     serve_until_signalled(daemon)
     return 0
+
+
+def served_sensors(scene: Scene, listed: str | None) -> tuple[str, ...] | None:
+    """`--sensors a,b` → ("a", "b"), each a sensor of the scene; None serves them all."""
+    if listed is None:
+        return None
+    names = tuple(name.strip() for name in listed.split(","))
+    known = [spec.name for spec in scene.sensors]
+    for name in names:
+        if name not in known:
+            raise UserError(f"--sensors: no sensor named {name!r} (known: {', '.join(known) or 'none'})")
+    return names
 
 
 def serve_until_signalled(daemon: Daemon) -> None:

@@ -15,6 +15,16 @@ class WallClock:
         self._origin = time.monotonic()
         self._start_s = start_s
 
+    @classmethod
+    def from_epoch(cls, epoch_s: float, speed: float = 1.0) -> WallClock:
+        """Simulated time = (UNIX time − `epoch_s`) × speed: daemons given one epoch (on
+        hosts whose clocks agree) share simulated time without talking to each other.
+        Read once here; the clock then runs on the monotonic clock, immune to wall-clock steps."""
+        elapsed = time.time() - epoch_s
+        if elapsed < 0:
+            raise ValueError(f"the epoch {epoch_s} is {-elapsed:.3f} s in the future")
+        return cls(speed, start_s=elapsed * speed)
+
     def now(self) -> float:
         return self._start_s + (time.monotonic() - self._origin) * self.speed
 

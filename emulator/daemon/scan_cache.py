@@ -55,7 +55,13 @@ class ScanCache:
     SCAN_BATCH scans of a steady stream, in one `sensor.scans` job."""
 
     def __init__(
-        self, sensor: ScanSource, executor: Executor, size: int = SCAN_CACHE_SIZE, batch: int = SCAN_BATCH
+        self,
+        sensor: ScanSource,
+        executor: Executor,
+        size: int = SCAN_CACHE_SIZE,
+        batch: int = SCAN_BATCH,
+        *,
+        phase: int = 0,
     ) -> None:
         if size < 2 * batch:
             raise ValueError(f"a scan cache of {size} cannot hold two batches of {batch}")
@@ -63,6 +69,9 @@ class ScanCache:
         self._executor = executor
         self._size = size
         self._batch = batch
+        # A stream's first batch is `phase` scans short, so the batches of sensors with
+        # different phases fall due at different scans instead of all together.
+        self._phase = phase % batch
         self._futures: OrderedDict[tuple, Future] = OrderedDict()
         self._last_request: dict[str, Any] | None = None
         self._recent_times: dict[RequestKey, deque[float]] = {}
@@ -74,8 +83,19 @@ class ScanCache:
         self._last_request = request
         future = self._future(time_s, request)
         self._follow_stream(time_s, request)
-        scan = future.result()
+        try:
+            scan = future.result()
+        except BaseException:
+            self._forget(future)  # computed again if asked again (a restarted worker may succeed)
+            raise
         return scan if scan.time_s == time_s else dataclasses.replace(scan, time_s=time_s)
+
+    def pending(self, time_s: float) -> Future | None:
+        """The job computing the last request's scan at `time_s`, if one was started: a daemon
+        waits for it (without blocking) before waking the device that will ask for it."""
+        if self._last_request is None:
+            return None
+        return self._futures.get(_cache_key(time_s, self._last_request))
 
     def __len__(self) -> int:
         """How many scans (done or under way) the cache holds: at most its size."""
@@ -104,6 +124,10 @@ class ScanCache:
             self._futures.move_to_end(key)
         return future
 
+    def _forget(self, future: Future) -> None:
+        for key in [key for key, stored in self._futures.items() if stored is future]:
+            del self._futures[key]
+
     def _store(self, key: tuple, future: Future) -> None:
         self._futures[key] = future
         if len(self._futures) > self._size:
@@ -126,11 +150,16 @@ class ScanCache:
         until = self._predicted_until.get(shape)
         if until is not None and until - time_s > stride + STRIDE_TOLERANCE_S:
             return  # enough foreseen
-        self._predict(shape, until if until is not None and until > time_s - STRIDE_TOLERANCE_S else time_s, stride, request)
+        if until is not None and until > time_s - STRIDE_TOLERANCE_S:
+            self._predict(shape, until, stride, request)
+        else:  # a new stream: its first batch is short by the phase
+            self._predict(shape, time_s, stride, request, count=self._batch - self._phase)
 
-    def _predict(self, shape: RequestKey, after_s: float, stride: float, request: dict[str, Any]) -> None:
-        """Foresee the stream's next SCAN_BATCH scans after `after_s`, in one job."""
-        predicted = [after_s + j * stride for j in range(1, self._batch + 1)]
+    def _predict(
+        self, shape: RequestKey, after_s: float, stride: float, request: dict[str, Any], count: int | None = None
+    ) -> None:
+        """Foresee the stream's next `count` (default SCAN_BATCH) scans after `after_s`, in one job."""
+        predicted = [after_s + j * stride for j in range(1, (count or self._batch) + 1)]
         self._predicted_until[shape] = predicted[-1]
         self._submit_batch(predicted, request)
 

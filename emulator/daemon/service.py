@@ -19,8 +19,10 @@ each numpy pass among them; a request nobody foresaw is still computed alone.
 from __future__ import annotations
 
 import asyncio
+import dataclasses
 import os
-from concurrent.futures import ThreadPoolExecutor
+import sys
+from concurrent.futures import Executor, Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Callable, Mapping, Protocol, Sequence
 
@@ -30,6 +32,7 @@ from emulator.daemon.scan_cache import (
     ScanCache,
     SensorFactory,
 )
+from emulator.daemon.workers import ScanJobFailed, WorkerPool
 from emulator.errors import UserError
 from emulator.optics import World
 from emulator.scene.endpoints import Address, PtyAddress, plan_endpoints
@@ -49,6 +52,8 @@ DEVICE_OPTIONS: dict[str, tuple[str, ...]] = {
     "lms200": ("baud", "type_string", "angle_deg", "resolution_deg", "units", "firmware_profile"),
 }
 
+
+RETRY_AFTER_FAILURE_S = 0.1  # a device whose scan failed is polled again this much later (wall)
 
 DeviceFactory = Callable[[SensorSpec, Callable[..., Scan]], Device]
 
@@ -95,11 +100,21 @@ class Ready:
         return f"{text} -> {self.slave}" if self.slave else text
 
 
+class _WaitingForScan:
+    """Stands for a device's wake-up while its scan is still being computed."""
+
+    def cancel(self) -> None:
+        """A wait is called off by replacing it: `_resume` then finds another."""
+
+
 class DeviceSession:
     """One endpoint's device: client bytes in, outputs out, woken at its deadlines.
 
     `prefetch(deadline)` starts the scan the device will want then; `call_later`
     schedules the wake-up (default: the loop's own, millisecond-accurate timers).
+    `pending(scan_time)` gives the job computing that scan, if any: at its deadline
+    the device is woken only once that job is done, so the loop never waits on a
+    computation (the device then finds its scan ready).
     """
 
     def __init__(
@@ -109,11 +124,14 @@ class DeviceSession:
         loop: asyncio.AbstractEventLoop,
         prefetch: Callable[[float], None] | None = None,
         call_later: Callable[..., Cancellable] | None = None,
+        pending: Callable[[float], Future | None] | None = None,
     ) -> None:
         self.device = device
         self.endpoint: PtyEndpoint | TcpEndpoint | None = None
         self._clock = clock
+        self._loop = loop
         self._prefetch = prefetch
+        self._pending = pending
         self._call_later = call_later or loop.call_later
         self._timer: Cancellable | None = None
         self._prefetch_timer: Cancellable | None = None
@@ -145,7 +163,32 @@ class DeviceSession:
 
     def _wake(self) -> None:
         self._timer = None
-        self._deliver(self.device.poll(self._clock.now()))
+        deadline = self.device.next_deadline()
+        job = self._pending(self._scan_time(deadline)) if self._pending is not None and deadline is not None else None
+        if job is not None and not job.done():
+            waiting = self._timer = _WaitingForScan()
+            job.add_done_callback(lambda _: self._loop.call_soon_threadsafe(self._resume, waiting))
+            return
+        self._poll()
+
+    def _resume(self, waiting: _WaitingForScan) -> None:
+        """The scan the device waited for is ready (unless the wait was called off meanwhile)."""
+        if self._timer is waiting:
+            self._timer = None
+            self._poll()
+
+    def _poll(self) -> None:
+        """Let the device send what is due; a scan that failed (its worker died twice) is
+        reported on stderr and the device tried again a moment later, never left asleep."""
+        try:
+            outputs = self.device.poll(self._clock.now())
+        except ScanJobFailed as error:
+            print(f"scan failed: {type(error).__name__}: {error}; retrying in {RETRY_AFTER_FAILURE_S:g} s",
+                  file=sys.stderr, flush=True)
+            self.stop()
+            self._timer = self._call_later(RETRY_AFTER_FAILURE_S, self._wake)
+            return
+        self._deliver(outputs)
 
     def _deliver(self, outputs: list[Output]) -> None:
         if outputs and self.endpoint is not None:
@@ -171,10 +214,26 @@ class DeviceSession:
         return deadline if scan_time is None else scan_time
 
 
+def _served(scene: Scene, sensors: Sequence[str] | None) -> Scene:
+    """The scene as far as endpoints go: sensors not served keep no endpoints to clash with."""
+    if sensors is None:
+        return scene
+    return dataclasses.replace(
+        scene, sensors=tuple(spec if spec.name in sensors else dataclasses.replace(spec, endpoints=()) for spec in scene.sensors)
+    )
+
+
+def _only(plan: list, sensors: Sequence[str] | None) -> list:
+    """The plan's entries for the `sensors` served (all when None)."""
+    return plan if sensors is None else [(spec, addresses) for spec, addresses in plan if spec.name in sensors]
+
+
 class Daemon:
     """Serves `scene`'s sensors. `endpoints_override` maps a sensor name to the
     URIs that replace its scene endpoints; `sensor_factory` supplies scan sources
-    (default: the simulation); `device_factory` builds each endpoint's device."""
+    (default: the simulation); `device_factory` builds each endpoint's device.
+    `workers` > 0 computes the simulation's scans in that many worker processes
+    (at most one per sensor); `sensors` serves only those of the scene (a fleet)."""
 
     def __init__(
         self,
@@ -184,16 +243,20 @@ class Daemon:
         *,
         sensor_factory: SensorFactory | None = None,
         device_factory: DeviceFactory = build_device,
+        workers: int = 0,
+        sensors: Sequence[str] | None = None,
     ) -> None:
         self.scene = scene
         self.clock = clock or WallClock()
         self.sessions: list[DeviceSession] = []
         self.endpoints: list[PtyEndpoint | TcpEndpoint] = []
-        self._plan = plan_endpoints(scene, endpoints_override)
+        self._plan = _only(plan_endpoints(_served(scene, sensors), endpoints_override), sensors)
         self._overridden = frozenset(endpoints_override or ())
         self._sensor_factory = sensor_factory
         self._device_factory = device_factory
         self._scan_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="scan")
+        self._workers = workers if sensor_factory is None else 0  # a supplied scan source stays in-process
+        self.pool: WorkerPool | None = None
         self._timer: PreciseTimer | None = None
         self._stopped = asyncio.Event()  # set by stop(), even before run() has begun
 
@@ -202,14 +265,16 @@ class Daemon:
         `ready` lines never finds one endpoint serving while a later one fails.
         If one cannot be bound, those already bound are closed and a UserError
         names it and where it was asked for."""
-        factory = self._sensor_factory or simulated_sensors(self.scene)
+        factory, executor = self._scan_sources()
         self._timer = PreciseTimer(loop)
         readies = []
-        for spec, addresses in self._plan:
-            scans = ScanCache(factory(spec), self._scan_thread)
+        for ordinal, (spec, addresses) in enumerate(self._plan):
+            scans = ScanCache(factory(spec), executor, phase=ordinal)
             for position, address in enumerate(addresses):
                 device = self._device_factory(spec, scans)
-                session = DeviceSession(device, self.clock, loop, scans.prefetch, self._timer.call_later)
+                session = DeviceSession(
+                    device, self.clock, loop, scans.prefetch, self._timer.call_later, pending=scans.pending
+                )
                 try:
                     readies.append(self._open(spec, address, session, loop))
                 except UserError as error:
@@ -220,6 +285,18 @@ class Daemon:
             session.start()
         for ready in readies:
             on_ready(ready)
+
+    def _scan_sources(self) -> tuple[SensorFactory, Executor]:
+        """Where scans are computed: in worker processes (sensors dealt out in turn), else
+        on the scan thread (a supplied scan source, or `workers=0`)."""
+        if self._workers <= 0:
+            return self._sensor_factory or simulated_sensors(self.scene), self._scan_thread
+        names = [spec.name for spec, _ in self._plan]
+        count = min(self._workers, len(names)) or 1
+        self.pool = WorkerPool(self.scene, [tuple(names[index::count]) for index in range(count)])
+        self.pool.start()
+        pool = self.pool
+        return (lambda spec: pool.sensor(spec.name)), pool.executor()
 
     def _origin(self, spec: SensorSpec, position: int) -> str:
         """Where an endpoint was asked for: `--endpoint urg` or `x.toml: sensors[0].endpoints[1]`."""
@@ -261,6 +338,9 @@ class Daemon:
         self.sessions.clear()
         self.endpoints.clear()
         self._scan_thread.shutdown(wait=False, cancel_futures=True)
+        if self.pool is not None:
+            self.pool.close()
+            self.pool = None
         if self._timer is not None:
             self._timer.close()
             self._timer = None

@@ -1,0 +1,330 @@
+"""Scans computed in worker processes, so a daemon uses every core and its loop never computes.
+
+Each worker process builds its own optics world from the scene and holds the
+sensors assigned to it; the daemon's scan caches hand it jobs through a
+`WorkerExecutor` (a `concurrent.futures` executor whose `submit` takes a
+`RemoteSensor`'s `scan` or `scans`) and get `Scan`s back, pickled over a pipe.
+
+The protocol on the pipe, parent → worker: `("scan", job, sensor, time_s, request)`,
+`("scans", job, sensor, times_s, request)`, `("apply", job, events)` (world changes,
+JSON-able dicts applied at their simulated instants: live control, issue 13) and
+`("stop",)`; worker → parent: `("ready", pid)` once its world is built, then
+`("done", job, result)` or `("failed", job, message)`.
+
+A worker that dies (killed, out of memory) is restarted with the same scene,
+sensors and applied events, and the jobs it held are sent again (a scan is a
+pure function of its time, so a repeat is the same scan); a job that kills a
+worker twice fails with `WorkerCrashed`, so a device gets an error, never a
+hang.
+"""
+
+from __future__ import annotations
+
+import itertools
+import multiprocessing
+import multiprocessing.connection
+import sys
+import threading
+import types
+from concurrent.futures import Executor, Future
+from dataclasses import dataclass, field
+from multiprocessing.reduction import ForkingPickler
+from typing import Any, Callable, Sequence
+
+from emulator.scene.model import Scene
+from emulator.sensors.scan import Scan
+
+WORKER_START_TIMEOUT_S = 120.0  # building a world from a large mesh scene can take a while
+MAX_ATTEMPTS = 2  # a job is sent to at most this many worker lives
+
+
+class ScanJobFailed(RuntimeError):
+    """A scan job did not produce its scans (the daemon reports it and tries again later)."""
+
+
+class WorkerCrashed(ScanJobFailed):
+    """A scan job's worker died (twice) while computing it."""
+
+
+def _mapping_proxy(items: dict) -> types.MappingProxyType:
+    return types.MappingProxyType(items)
+
+
+# Scenes hold read-only mappings (types.MappingProxyType), which pickle refuses: send them as dicts.
+ForkingPickler.register(types.MappingProxyType, lambda proxy: (_mapping_proxy, (dict(proxy),)))
+
+
+def apply_events(world: Any, scene: Scene, events: Sequence[dict]) -> None:
+    """Apply world-change events in a worker. None are defined yet (live control, issue 13,
+    plugs in here): an event of an unknown kind is refused by name."""
+    for event in events:
+        raise ValueError(f"unknown world event kind {event.get('kind')!r}")
+
+
+@dataclass(frozen=True)
+class RemoteSensor:
+    """A sensor held by a worker: its `scan`/`scans` are what a `WorkerExecutor` runs there.
+    Calling them directly is an error (the daemon must not compute on its own thread)."""
+
+    name: str
+
+    def scan(self, time_s: float, **request: Any) -> Scan:
+        raise RuntimeError(f"sensor {self.name!r} is computed in a worker: submit its scan to a WorkerExecutor")
+
+    def scans(self, times_s: Sequence[float], **request: Any) -> list[Scan]:
+        raise RuntimeError(f"sensor {self.name!r} is computed in a worker: submit its scans to a WorkerExecutor")
+
+
+def _worker_main(scene: Scene, sensor_names: Sequence[str], connection: multiprocessing.connection.Connection) -> None:
+    """A worker's life: build the world once, then answer jobs in order until told to stop."""
+    from emulator.optics import World  # imported here: the parent need not build one
+    from emulator.sensors import create_sensor
+
+    world = World(scene)
+    sensors = {name: create_sensor(scene, name, world=world) for name in sensor_names}
+    connection.send(("ready", multiprocessing.current_process().pid))
+    while True:
+        try:
+            message = connection.recv()
+        except (EOFError, OSError):
+            return  # the daemon went away
+        kind = message[0]
+        if kind == "stop":
+            return
+        job = message[1]
+        try:
+            if kind == "scan":
+                _, _, name, time_s, request = message
+                result: Any = sensors[name].scan(time_s, **request)
+            elif kind == "scans":
+                _, _, name, times_s, request = message
+                result = sensors[name].scans(times_s, **request)
+            elif kind == "apply":
+                apply_events(world, scene, message[2])
+                result = len(message[2])
+            else:
+                raise ValueError(f"unknown worker message {kind!r}")
+        except Exception as error:  # the daemon gets it as the job's exception
+            connection.send(("failed", job, f"{type(error).__name__}: {error}"))
+        else:
+            connection.send(("done", job, result))
+
+
+class WorkerFailed(ScanJobFailed):
+    """A job raised in its worker; the message names the worker's exception."""
+
+
+@dataclass
+class _Job:
+    message: tuple
+    future: Future
+    attempts: int = 0
+
+
+@dataclass
+class _Worker:
+    """One worker process and the jobs it holds."""
+
+    index: int
+    sensor_names: tuple[str, ...]
+    process: Any = None
+    connection: multiprocessing.connection.Connection | None = None
+    jobs: dict[int, _Job] = field(default_factory=dict)
+    lives: int = 0
+
+
+class WorkerPool:
+    """Worker processes, each holding some of `scene`'s sensors (`assignment`: one tuple of
+    sensor names per worker). `start()` returns once every world is built.
+    `on_restart(line)` reports a restarted worker (the daemon prints it on stderr)."""
+
+    def __init__(
+        self,
+        scene: Scene,
+        assignment: Sequence[Sequence[str]],
+        *,
+        on_restart: Callable[[str], None] = lambda line: print(line, file=sys.stderr, flush=True),
+    ) -> None:
+        self.scene = scene
+        self._context = multiprocessing.get_context("spawn")
+        self._workers = [_Worker(index, tuple(names)) for index, names in enumerate(assignment) if names]
+        self._worker_of = {name: worker for worker in self._workers for name in worker.sensor_names}
+        self._events: list[dict] = []  # every event applied so far: a restarted worker replays them
+        self._job_ids = itertools.count()
+        self._lock = threading.Lock()
+        self._on_restart = on_restart
+        self._closed = False
+
+    @property
+    def pids(self) -> list[int]:
+        return [worker.process.pid for worker in self._workers if worker.process is not None]
+
+    def start(self) -> None:
+        for worker in self._workers:
+            self._launch(worker)
+        for worker in self._workers:
+            self._await_ready(worker)
+
+    def sensor(self, name: str) -> RemoteSensor:
+        if name not in self._worker_of:
+            raise KeyError(f"no worker holds sensor {name!r}")
+        return RemoteSensor(name)
+
+    def executor(self) -> WorkerExecutor:
+        return WorkerExecutor(self)
+
+    def submit(self, sensor: str, method: str, *args: Any) -> Future:
+        """Run `method` ("scan" or "scans") of `sensor` with `args` in its worker."""
+        worker = self._worker_of[sensor]
+        future: Future = Future()
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("the worker pool is closed")
+            job = next(self._job_ids)
+            worker.jobs[job] = _Job((method, job, sensor, *args), future)
+            self._send(worker, job)
+        return future
+
+    def apply(self, events: Sequence[dict]) -> list[Future]:
+        """Send world-change events to every worker; one future per worker (the count applied)."""
+        events = [dict(event) for event in events]
+        futures = []
+        with self._lock:
+            self._events += events
+            for worker in self._workers:
+                job = next(self._job_ids)
+                futures.append(Future())
+                worker.jobs[job] = _Job(("apply", job, events), futures[-1])
+                self._send(worker, job)
+        return futures
+
+    def close(self) -> None:
+        with self._lock:
+            self._closed = True
+            workers = list(self._workers)
+        for worker in workers:
+            if worker.connection is not None:
+                try:
+                    worker.connection.send(("stop",))
+                except OSError:
+                    pass
+        for worker in workers:
+            if worker.process is not None:
+                worker.process.join(timeout=2.0)
+                if worker.process.is_alive():
+                    worker.process.kill()
+                    worker.process.join()
+            for job in worker.jobs.values():
+                job.future.cancel()
+            worker.jobs.clear()
+            if worker.connection is not None:
+                worker.connection.close()
+
+    # -- inside ------------------------------------------------------------
+
+    def _launch(self, worker: _Worker) -> None:
+        parent, child = self._context.Pipe()
+        process = self._context.Process(
+            target=_worker_main,
+            args=(self.scene, worker.sensor_names, child),
+            name=f"lrf-scan-worker-{worker.index}",
+            daemon=True,
+        )
+        process.start()
+        child.close()
+        worker.process, worker.connection = process, parent
+        worker.lives += 1
+
+    def _await_ready(self, worker: _Worker) -> None:
+        connection = worker.connection
+        assert connection is not None
+        if not connection.poll(WORKER_START_TIMEOUT_S):
+            raise RuntimeError(f"scan worker {worker.index} did not start within {WORKER_START_TIMEOUT_S:g} s")
+        try:
+            connection.recv()
+        except EOFError:
+            raise RuntimeError(
+                f"scan worker {worker.index} exited while building its world (exit code {worker.process.exitcode})"
+            ) from None
+        threading.Thread(
+            target=self._read, args=(worker, connection), name=f"scan-worker-{worker.index}-reader", daemon=True
+        ).start()
+
+    def _send(self, worker: _Worker, job_id: int) -> None:
+        """Send one job (lock held); a broken pipe is the reader's to handle (it sees EOF too)."""
+        job = worker.jobs[job_id]
+        job.attempts += 1
+        try:
+            worker.connection.send(job.message)
+        except (OSError, ValueError):
+            pass
+
+    def _read(self, worker: _Worker, connection: multiprocessing.connection.Connection) -> None:
+        """Settle the worker's jobs as results arrive; on EOF the worker died: restart it."""
+        while True:
+            try:
+                kind, job_id, result = connection.recv()
+            except (EOFError, OSError):
+                break
+            with self._lock:
+                job = worker.jobs.pop(job_id, None)
+            if job is None or job.future.cancelled():
+                continue
+            if kind == "done":
+                job.future.set_result(result)
+            else:
+                job.future.set_exception(WorkerFailed(f"scan worker {worker.index}: {result}"))
+        self._restart(worker, connection)
+
+    def _restart(self, worker: _Worker, dead: multiprocessing.connection.Connection) -> None:
+        with self._lock:
+            if self._closed or worker.connection is not dead:
+                return
+            worker.process.join(timeout=1.0)
+            exit_code = worker.process.exitcode
+            held = dict(worker.jobs)
+            retried = {job_id: job for job_id, job in held.items() if job.attempts < MAX_ATTEMPTS}
+            failed = [job for job_id, job in held.items() if job_id not in retried]
+            worker.jobs = retried
+            dead.close()
+            self._launch(worker)
+        for job in failed:
+            job.future.set_exception(
+                WorkerCrashed(f"scan worker {worker.index} died twice computing {job.message[0]} of {job.message[2]!r}")
+            )
+        self._on_restart(
+            f"scan worker {worker.index} (sensors {', '.join(worker.sensor_names)}) died, exit code {exit_code}:"
+            f" restarted, {len(retried)} job(s) sent again"
+        )
+        try:
+            self._await_ready(worker)
+        except RuntimeError as error:
+            with self._lock:
+                jobs, worker.jobs = list(worker.jobs.values()), {}
+            for job in jobs:
+                job.future.set_exception(WorkerCrashed(str(error)))
+            return
+        with self._lock:
+            if self._events:
+                job = next(self._job_ids)
+                worker.jobs[job] = _Job(("apply", job, list(self._events)), Future(), attempts=0)
+                self._send(worker, job)
+            for job_id in list(worker.jobs):
+                if worker.jobs[job_id].message[0] != "apply":
+                    self._send(worker, job_id)
+
+
+class WorkerExecutor(Executor):
+    """An executor whose jobs are a `RemoteSensor`'s `scan` or `scans`, run in its worker."""
+
+    def __init__(self, pool: WorkerPool) -> None:
+        self._pool = pool
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:
+        sensor = getattr(fn, "__self__", None)
+        if not isinstance(sensor, RemoteSensor) or fn.__name__ not in ("scan", "scans"):
+            raise TypeError(f"a WorkerExecutor runs RemoteSensor.scan/scans, not {fn!r}")
+        return self._pool.submit(sensor.name, fn.__name__, *args, kwargs)
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        """The pool is the daemon's to close."""

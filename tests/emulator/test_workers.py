@@ -1,0 +1,82 @@
+"""Scans computed in worker processes: the same scans as in-process, and a dead worker is restarted."""
+
+from __future__ import annotations
+
+import os
+import signal
+from concurrent.futures import Future
+
+import numpy as np
+import pytest
+
+from emulator.daemon.scan_cache import ScanCache
+from emulator.daemon.workers import RemoteSensor, WorkerFailed, WorkerPool
+from emulator.optics import World
+from emulator.scene import load_scene
+from emulator.sensors import create_sensor
+from emulator.sensors.lms200 import configured_window
+
+
+@pytest.fixture(scope="module")
+def railway_pool():
+    scene = load_scene("railway")
+    restarts: list[str] = []
+    pool = WorkerPool(scene, [("urg",), ("lms",)], on_restart=restarts.append)
+    pool.start()
+    yield scene, pool, restarts
+    pool.close()
+
+
+def test_worker_scans_equal_in_process_scans(railway_pool) -> None:
+    scene, pool, _ = railway_pool
+    world = World(scene)
+    executor = pool.executor()
+    for name, request in (("urg", {}), ("lms", configured_window(scene.sensor("lms").options))):
+        local = create_sensor(scene, name, world=world)
+        times = [5.0 + 0.1 * j for j in range(4)]
+        batch = executor.submit(pool.sensor(name).scans, times, **request).result(timeout=60)
+        alone = executor.submit(pool.sensor(name).scan, 7.25, **request).result(timeout=60)
+        for scan, expected in zip([*batch, alone], [*local.scans(times, **request), local.scan(7.25, **request)]):
+            assert scan.time_s == expected.time_s
+            np.testing.assert_array_equal(scan.values, expected.values)
+
+
+def test_a_scan_cache_over_workers_serves_a_stream(railway_pool) -> None:
+    scene, pool, _ = railway_pool
+    cache = ScanCache(pool.sensor("urg"), pool.executor(), phase=3)
+    local = create_sensor(scene, "urg", world=World(scene))
+    for index in range(1, 20):
+        cache.prefetch(index / 10)
+        pending = cache.pending(index / 10)
+        assert pending is None or isinstance(pending, Future)
+        np.testing.assert_array_equal(cache(index / 10).values, local.scan(index / 10).values)
+
+
+def test_a_killed_worker_is_restarted_and_its_jobs_computed_again(railway_pool) -> None:
+    scene, pool, restarts = railway_pool
+    executor = pool.executor()
+    executor.submit(pool.sensor("urg").scan, 1.0).result(timeout=60)
+    victim = pool.pids[0]
+    jobs = [executor.submit(pool.sensor("urg").scans, [2.0 + 0.1 * j for j in range(8)]) for _ in range(6)]
+    os.kill(victim, signal.SIGKILL)
+    local = create_sensor(scene, "urg", world=World(scene))
+    for job in jobs:
+        scans = job.result(timeout=120)  # never hangs: recomputed by the new worker
+        np.testing.assert_array_equal(scans[0].values, local.scan(2.0).values)
+    assert pool.pids[0] != victim
+    assert len(restarts) == 1 and "scan worker 0 (sensors urg) died" in restarts[0]
+    later = executor.submit(pool.sensor("urg").scan, 3.0).result(timeout=60)
+    np.testing.assert_array_equal(later.values, local.scan(3.0).values)
+
+
+def test_a_failing_job_fails_with_the_workers_error_and_events_of_unknown_kind_are_refused(railway_pool) -> None:
+    _, pool, _ = railway_pool
+    failing = pool.executor().submit(pool.sensor("urg").scan, 1.0, bogus=1)
+    with pytest.raises(WorkerFailed, match="TypeError"):
+        failing.result(timeout=60)
+    with pytest.raises(TypeError):
+        pool.executor().submit(print, "not a sensor")
+    with pytest.raises(RuntimeError, match="computed in a worker"):
+        RemoteSensor("urg").scan(1.0)
+    applied = pool.apply([])
+    assert [future.result(timeout=60) for future in applied] == [0, 0]
