@@ -6,6 +6,8 @@ the URG-04LX every 0.1 s; the LMS200 every full scan of its resolution, i.e.
 the mirror revolutions that scan needs (1°: 1/75 s, 0.5°: 2/75 s,
 0.25°: 4/75 s), with the scene's angle, resolution and units.
 Scan k is taken at t = k · period, for every k with T0 ≤ t ≤ T1.
+Beside the log goes the ground truth: FILE with the suffix `.tum`, one TUM
+line `t x y z qx qy qz qw` per scan, the sensor's world pose at its time stamp.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import itertools
 
 from emulator.commands.options import add_scene_options, add_span_options, scene_from_args
 from emulator.errors import UserError
+from emulator.recording.ground_truth import with_ground_truth
 from emulator.recording.textlog import LogHeader, write_log
 from emulator.sensors import create_sensor
 from emulator.sensors.series import scan_series, scan_times
@@ -32,11 +35,18 @@ def run(args: argparse.Namespace) -> int:
     first = next(scans, None)
     if first is None:
         raise UserError(f"no scan of {sensor.name} completes between {args.start} and {args.end} s")
+    truth_path = ground_truth_path(args.out)
     try:
-        with args.out.open("w", encoding="ascii") as out:
+        with args.out.open("w", encoding="ascii") as out, truth_path.open("w", encoding="ascii") as truth:
             header = LogHeader(sensor.name, sensor.model, first.unit)
-            count = write_log(out, itertools.chain([first], scans), header)
+            count = write_log(out, with_ground_truth(itertools.chain([first], scans), sensor, truth), header)
     except OSError as error:
-        raise UserError(f"cannot write {args.out}: {error.strerror}") from None
-    print(f"recorded {count} scans of {sensor.name} ({sensor.model}) to {args.out}")
+        raise UserError(f"cannot write {error.filename or args.out}: {error.strerror}") from None
+    print(f"recorded {count} scans of {sensor.name} ({sensor.model}) to {args.out}, ground truth to {truth_path}")
     return 0
+
+
+def ground_truth_path(log: Path) -> Path:
+    """Where the ground truth of `log` goes: the same name with `.tum` (`.tum` added if the log has it)."""
+    path = log.with_suffix(".tum")
+    return path if path != log else log.with_name(log.name + ".tum")

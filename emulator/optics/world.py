@@ -7,10 +7,14 @@ triangle's plane (Embree works in float32). Smoke regions use exact analytic
 chords (`chords.py`); plume particles are axis-aligned boxes met by a
 vectorised slab test over beams × particles.
 
-Objects and region shapes never move: what a fixed set of beams meets of them
-is computed once by `prepare` (a sensor keeps it), and `cast_prepared` adds
-what changes with time (region densities, particles). Only the first particle
-per beam is computed on demand, as the `physical` preset never asks for it.
+Fixed objects (and those on bodies without a trajectory) and region shapes
+never move: what a fixed set of beams meets of them is computed once by
+`prepare` (a sensor keeps it), and `cast_prepared` adds what changes with
+time (region densities, particles, and the objects riding on moving bodies,
+`moving.py`, each beam at its own instant). Only the first particle per beam
+is computed on demand, as the `physical` preset never asks for it.
+`World.bodies` holds every body's pose source; a live body's poses are fed in
+through `World.bodies.add_live_pose`.
 """
 
 from __future__ import annotations
@@ -24,8 +28,10 @@ from emulator.errors import SceneError
 from emulator.optics.candidates import candidate_pairs
 from emulator.optics.chords import NO_HIT, paired_cube_intervals, shape_intervals
 from emulator.optics.hits import BeamHits, PreparedBeams, RegionCrossing
+from emulator.optics.moving import MovingSolids, Solids, exact_hits, triangle_planes
+from emulator.scene.bodies import BodyPoses, mounted_matrix
 from emulator.scene.geometry import shape_mesh, world_mesh, world_to_local
-from emulator.scene.model import MeshFile, Scene
+from emulator.scene.model import MeshFile, Scene, SceneObject
 from emulator.scene.plumes import Particles, particles_at
 
 
@@ -34,17 +40,17 @@ class World:
 
     def __init__(self, scene: Scene) -> None:
         self.scene = scene
-        meshes = [world_mesh(obj.shape, obj.pose) for obj in scene.objects]
+        self.bodies = BodyPoses(scene.bodies)
+        fixed = [(i, self._fixed_mesh(obj)) for i, obj in enumerate(scene.objects) if not self._rides_moving_body(obj.body)]
+        meshes = [mesh for _, mesh in fixed]
         triangles = np.concatenate([m.triangles for m in meshes]) if meshes else np.zeros((0, 3, 3))
         normals = np.concatenate([m.face_normals for m in meshes]) if meshes else np.zeros((0, 3))
-        # per triangle: unit normal n and offset n·v0, so a hit's range is (n·v0 − n·o) / (n·d)
-        self._triangle_planes = np.concatenate(
-            [normals, np.einsum("ij,ij->i", normals, triangles[:, 0])[:, None]], axis=1
-        ).astype(np.float64)
+        self._triangle_planes = triangle_planes(triangles, normals)
         self._triangle_object = np.concatenate(
-            [np.full(len(m.faces), i, dtype=np.int64) for i, m in enumerate(meshes)] or [np.zeros(0, np.int64)]
+            [np.full(len(m.faces), i, dtype=np.int64) for i, m in fixed] or [np.zeros(0, np.int64)]
         )
         self._object_reflectivity = np.array([self._reflectivity(obj.material) for obj in scene.objects], dtype=float)
+        self.moving = MovingSolids(scene, self.bodies, self._object_reflectivity)
         self._embree: EmbreeScene | None = None
         if len(triangles):
             self._embree = EmbreeScene()
@@ -54,6 +60,17 @@ class World:
         }
         self._particles_time: float | None = None
         self._particles = Particles.empty()
+
+    def _rides_moving_body(self, body: str | None) -> bool:
+        return body is not None and self.scene.body(body).moving
+
+    def _fixed_mesh(self, obj: SceneObject) -> trimesh.Trimesh:
+        """A fixed object's mesh in the world (on a body without a trajectory: placed by the body's pose)."""
+        if obj.body is None:
+            return world_mesh(obj.shape, obj.pose)
+        mesh = shape_mesh(obj.shape).copy()
+        mesh.apply_transform(mounted_matrix(self.scene.body(obj.body), obj.pose))
+        return mesh
 
     def _reflectivity(self, material: str) -> float:
         if material not in self.scene.materials:
@@ -82,9 +99,12 @@ class World:
             dists=limits,
         )
 
-    def cast(self, origins: np.ndarray, directions: np.ndarray, max_range_m: float, time_s: float) -> BeamHits:
-        """Cast beams from `origins` (N, 3) along unit `directions` (N, 3) at `time_s`."""
-        return self.cast_prepared(self.prepare(origins, directions, max_range_m), time_s)
+    def cast(
+        self, origins: np.ndarray, directions: np.ndarray, max_range_m: float, time_s: float, beam_times_s: np.ndarray | None = None
+    ) -> BeamHits:
+        """Cast beams from `origins` (N, 3) along unit `directions` (N, 3) at `time_s` (moving bodies'
+        objects at each beam's own instant `beam_times_s` (N,) when given)."""
+        return self.cast_prepared(self.prepare(origins, directions, max_range_m), time_s, beam_times_s)
 
     def prepare(self, origins: np.ndarray, directions: np.ndarray, max_range_m: float) -> PreparedBeams:
         """What the beams meet of the scene's fixed geometry: solids and region intervals."""
@@ -104,8 +124,11 @@ class World:
             beam_end,
         )
 
-    def cast_prepared(self, prepared: PreparedBeams, time_s: float) -> BeamHits:
-        """`cast` of prepared beams at `time_s`: only the smoke is evaluated."""
+    def cast_prepared(self, prepared: PreparedBeams, time_s: float, beam_times_s: np.ndarray | None = None) -> BeamHits:
+        """`cast` of prepared beams at `time_s`: the smoke, and the moving bodies' objects at each
+        beam's instant in `beam_times_s` (N,) (all at `time_s` when None)."""
+        if self.moving:
+            prepared = self._with_moving_solids(prepared, time_s, beam_times_s)
         regions = tuple(
             RegionCrossing(i, float(region.density.at(time_s)), *prepared.region_intervals[i])
             for i, region in enumerate(self.scene.regions)
@@ -128,6 +151,21 @@ class World:
             first_particle=lambda: self._first_particle(prepared.origins, prepared.directions, beam_end, time_s),
         )
 
+    def _with_moving_solids(self, prepared: PreparedBeams, time_s: float, beam_times_s: np.ndarray | None) -> PreparedBeams:
+        """`prepared` with the moving bodies' objects added where they are nearer (fresh, writeable arrays:
+        they hold for this instant only, so no cache keeps them)."""
+        times = np.full(len(prepared.origins), time_s) if beam_times_s is None else np.asarray(beam_times_s, dtype=float)
+        fixed = Solids(prepared.solid_range_m, prepared.object_index, prepared.reflectivity, prepared.cos_incidence)
+        solids = self.moving.nearest(fixed, prepared.origins, prepared.directions, prepared.max_range_m, times)
+        beam_end = np.minimum(solids.range_m, prepared.max_range_m)
+        lengths = tuple(
+            RegionCrossing(i, 0.0, *interval).length_before(beam_end) for i, interval in enumerate(prepared.region_intervals)
+        )
+        return PreparedBeams(
+            prepared.origins, prepared.directions, prepared.max_range_m, solids.range_m, solids.object_index,
+            solids.reflectivity, solids.cos_incidence, prepared.region_intervals, lengths, beam_end,
+        )
+
     def _solids(
         self, origins: np.ndarray, directions: np.ndarray, max_range_m: float
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -136,18 +174,10 @@ class World:
             nothing = np.zeros(len(origins))
             return np.full(len(origins), np.inf), np.full(len(origins), -1, dtype=np.int64), nothing, nothing.copy()
         triangle = self.first_triangles(origins, directions, max_range_m)
-        planes = self._triangle_planes.take(triangle, axis=0, mode="clip")  # -1 (no hit) reads row 0, masked below
-        facing = np.einsum("ij,ij->i", planes[:, :3], directions)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            exact_range = (planes[:, 3] - np.einsum("ij,ij->i", planes[:, :3], origins)) / facing
-        hit = (triangle >= 0) & (exact_range <= max_range_m)
-        objects = np.where(hit, self._triangle_object.take(triangle, mode="clip"), -1)
-        return (
-            np.where(hit, exact_range, np.inf),
-            objects,
-            np.where(hit, self._object_reflectivity.take(objects, mode="clip"), 0.0),
-            np.where(hit, np.abs(facing), 0.0),
+        solids = exact_hits(
+            triangle, self._triangle_planes, self._triangle_object, self._object_reflectivity, origins, directions, max_range_m
         )
+        return solids.range_m, solids.object_index, solids.reflectivity, solids.cos_incidence
 
     def _region_intervals(
         self, index: int, origins: np.ndarray, directions: np.ndarray, max_range_m: float

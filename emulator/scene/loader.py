@@ -13,6 +13,8 @@ import dataclasses
 import json
 import math
 import os
+
+import numpy as np
 import re
 import tomllib
 from dataclasses import dataclass
@@ -22,6 +24,7 @@ from types import MappingProxyType
 from typing import Any, Iterable, Mapping, Sequence
 
 from emulator.errors import SceneError, UserError
+from emulator.scene.bodies import LIVE, Body, Keyframes, Trajectory, euler_quaternion
 from emulator.scene.endpoints import Address, EndpointClaims, parse_endpoint
 
 ENDPOINT_SYNTAX = '"pty:PATH", "tcp:HOST:PORT" or "rfc2217:HOST:PORT" with PORT 0..65535'
@@ -52,10 +55,17 @@ SENSOR_MODELS = ("urg-04lx", "lms200")
 SHAPE_KEYS = ("box", "sphere", "cylinder", "mesh")
 ORIGIN: Vec3 = (0.0, 0.0, 0.0)
 
-TOP_KEYS = ("scene", "materials", "objects", "smoke", "sensors")
+TOP_KEYS = ("scene", "materials", "bodies", "objects", "smoke", "sensors")
 SCENE_KEYS = ("name", "description", "seed", "model", "density_to_extinction")
 SMOKE_KEYS = ("regions", "plumes")
-OBJECT_KEYS = ("name", *SHAPE_KEYS, "position", "rotation_deg", "material")
+OBJECT_KEYS = ("name", *SHAPE_KEYS, "position", "rotation_deg", "material", "body")
+BODY_KEYS = ("name", "position", "rotation_deg", "trajectory")
+TRAJECTORY_KEYS = ("keyframes", "file")
+PLANAR_ROW = 4  # [t, x, y, yaw_deg]
+FULL_ROW = 7  # [t, x, y, z, roll_deg, pitch_deg, yaw_deg]
+TUM_NUMBERS = 8  # t x y z qx qy qz qw
+TUM_MAX_BYTES = 64 * 1024 * 1024
+TUM_MAX_LINES = 1_000_000
 REGION_KEYS = ("name", *SHAPE_KEYS, "position", "rotation_deg", "density")
 PLUME_KEYS = (
     "name", "source", "rate", "lifetime", "size", "growth",
@@ -67,7 +77,7 @@ MATERIAL_KEYS = tuple(field.name for field in dataclasses.fields(Material))
 URG_OPTION_KEYS = ("boot_protocol", "serial")
 LMS_OPTION_KEYS = ("baud", "angle_deg", "resolution_deg", "units", "type_string", "firmware_profile")
 OPTION_KEYS = {"urg-04lx": URG_OPTION_KEYS, "lms200": LMS_OPTION_KEYS}
-SENSOR_KEYS = ("name", "model", "position", "rotation_deg", "endpoints", *URG_OPTION_KEYS, *LMS_OPTION_KEYS)
+SENSOR_KEYS = ("name", "model", "body", "position", "rotation_deg", "endpoints", *URG_OPTION_KEYS, *LMS_OPTION_KEYS)
 URG_SERIAL_MAX_CHARS = 16
 LMS_TYPE_STRING_CHARS = 21
 LMS_BAUDS = (9600, 19200, 38400, 500000)
@@ -332,6 +342,11 @@ def _build_scene(raw: dict[str, Any], path: Path) -> Scene:
         raise header.place.key("description").error("must be one line")
     materials = _materials(root.tables("materials", MATERIAL_KEYS))
     smoke = root.table("smoke", SMOKE_KEYS) if "smoke" in root else _Table({}, root.place.key("smoke"))
+    body_tables = root.tables("bodies", BODY_KEYS)
+    bodies = _bodies(body_tables, path.parent)
+    objects = _objects(root.tables("objects", OBJECT_KEYS), materials, path.parent, bodies)
+    sensors = _sensors(root.tables("sensors", SENSOR_KEYS), bodies)
+    _check_bodies_carry(body_tables, bodies, objects, sensors)
     return Scene(
         path=path,
         name=header.string("name", path.stem),
@@ -340,10 +355,11 @@ def _build_scene(raw: dict[str, Any], path: Path) -> Scene:
         model=header.string("model", "formsma2011", SCENE_MODELS),
         density_to_extinction=header.number("density_to_extinction", 250.0, above=0),
         materials=materials,
-        objects=_objects(root.tables("objects", OBJECT_KEYS), materials, path.parent),
-        regions=_regions(smoke.tables("regions", REGION_KEYS), path.parent),
+        objects=objects,
+        regions=_regions(_region_tables(smoke), path.parent),
         plumes=_plumes(smoke.tables("plumes", PLUME_KEYS)),
-        sensors=_sensors(root.tables("sensors", SENSOR_KEYS)),
+        sensors=sensors,
+        bodies=bodies,
     )
 
 
@@ -389,7 +405,20 @@ def _shape(table: _Table, scene_dir: Path, *, closed: bool) -> Shape:
     return MeshFile(mesh_path)
 
 
-def _objects(tables: list[_Table], materials: Mapping[str, Material], scene_dir: Path) -> tuple[SceneObject, ...]:
+def _body_of(table: _Table, bodies: tuple[Body, ...]) -> str | None:
+    """The item's `body`, which must name one of the scene's bodies (None when absent)."""
+    if "body" not in table:
+        return None
+    name = table.string("body")
+    if name not in {body.name for body in bodies}:
+        known = ", ".join(body.name for body in bodies) or "none"
+        raise table.place.key("body").error(f"unknown body {_show(name)} (bodies: {known})")
+    return name
+
+
+def _objects(
+    tables: list[_Table], materials: Mapping[str, Material], scene_dir: Path, bodies: tuple[Body, ...]
+) -> tuple[SceneObject, ...]:
     seen: dict[str, str] = {}
     objects = []
     for table in tables:
@@ -398,12 +427,15 @@ def _objects(tables: list[_Table], materials: Mapping[str, Material], scene_dir:
         if material not in materials:
             known = ", ".join(sorted(materials))
             raise table.place.key("material").error(f"unknown material {_show(material)} (known: {known})")
-        objects.append(SceneObject(name, _shape(table, scene_dir, closed=False), table.pose(), material))
+        objects.append(
+            SceneObject(name, _shape(table, scene_dir, closed=False), table.pose(), material, _body_of(table, bodies))
+        )
     return tuple(objects)
 
 
 def _density(table: _Table) -> Density:
-    """A constant density >= 0, or { keyframes = [[t, density], ...] } with strictly increasing times."""
+    """A constant density >= 0, or { keyframes = [[t, density], ...] } with times that do not decrease
+    (two rows at one time are a step)."""
     place = table.place.key("density")
     raw = table.raw("density", _MISSING)
     if isinstance(raw, dict):
@@ -426,12 +458,22 @@ def _keyframes(table: _Table) -> Density:
         time_s = _as_number(pair[0], pair_place.index(0))
         density = _as_number(pair[1], pair_place.index(1))
         _check_bounds(density, pair[1], pair_place.index(1), at_least=0)
-        if keyframes and not time_s > keyframes[-1][0]:
+        if keyframes and time_s < keyframes[-1][0]:
             raise pair_place.index(0).error(
-                f"keyframe times must increase strictly, got {_show(pair[0])} after {_show(raw[position - 1][0])}"
+                f"keyframe times must not decrease, got {_show(pair[0])} after {_show(raw[position - 1][0])}"
             )
         keyframes.append((time_s, density))
     return Density(tuple(keyframes))
+
+
+def _region_tables(smoke: _Table) -> list[_Table]:
+    """The [[smoke.regions]] tables; a `body` key there gets its own answer, not just "unknown key"."""
+    raw = smoke.raw("regions", [])
+    for position, item in enumerate(raw if isinstance(raw, list) else []):
+        if isinstance(item, dict) and "body" in item:
+            place = smoke.place.key("regions").index(position).key("body")
+            raise place.error("smoke regions cannot ride on a body (the paper's smoke areas never move)")
+    return smoke.tables("regions", REGION_KEYS)
 
 
 def _regions(tables: list[_Table], scene_dir: Path) -> tuple[SmokeRegion, ...]:
@@ -530,7 +572,7 @@ def _lms_options(table: _Table) -> dict[str, Any]:
     }
 
 
-def _sensors(tables: list[_Table]) -> tuple[SensorSpec, ...]:
+def _sensors(tables: list[_Table], bodies: tuple[Body, ...]) -> tuple[SensorSpec, ...]:
     seen: dict[str, str] = {}
     claims = EndpointClaims()
     sensors = []
@@ -543,5 +585,135 @@ def _sensors(tables: list[_Table]) -> tuple[SensorSpec, ...]:
             raise table.place.key(foreign).error(f"is an option of {other_model}, not of {model}")
         options = _urg_options(table) if model == "urg-04lx" else _lms_options(table)
         endpoints = _endpoints(table, claims, name)
-        sensors.append(SensorSpec(name, model, table.pose(), endpoints, MappingProxyType(options)))
+        body = _body_of(table, bodies)
+        sensors.append(SensorSpec(name, model, table.pose(), endpoints, MappingProxyType(options), body))
     return tuple(sensors)
+
+
+# --------------------------------------------------------------------------- bodies
+
+
+def _bodies(tables: list[_Table], scene_dir: Path) -> tuple[Body, ...]:
+    seen: dict[str, str] = {}
+    bodies = []
+    for table in tables:
+        name = table.name(seen)
+        pose = table.pose()
+        trajectory = _trajectory(table, pose, scene_dir) if "trajectory" in table else None
+        bodies.append(Body(name, pose, trajectory))
+    return tuple(bodies)
+
+
+def _check_bodies_carry(
+    tables: list[_Table], bodies: tuple[Body, ...], objects: tuple[SceneObject, ...], sensors: tuple[SensorSpec, ...]
+) -> None:
+    """A body that carries nothing is almost surely a typo in some `body` key."""
+    used = {item.body for item in (*objects, *sensors)}
+    for table, body in zip(tables, bodies):
+        if body.name not in used:
+            raise table.place.key("name").error(
+                f"body {_show(body.name)} carries nothing (no sensor or object has body = {_show(body.name)})"
+            )
+
+
+def _trajectory(table: _Table, pose: Pose, scene_dir: Path) -> Trajectory:
+    """`"live"`, `{ keyframes = [...] }` or `{ file = "run.tum" }`."""
+    place = table.place.key("trajectory")
+    raw = table.raw("trajectory")
+    if raw == "live":
+        return LIVE
+    if not isinstance(raw, dict):
+        raise place.error(f'expected "live", {{ keyframes = [...] }} or {{ file = "run.tum" }}, got {_show(raw)}')
+    spec = _as_table(raw, place, TRAJECTORY_KEYS)
+    if ("keyframes" in spec) == ("file" in spec):
+        raise place.error("needs exactly one of: keyframes, file")
+    if "file" in spec:
+        return _tum_file(scene_dir / spec.string("file"), spec.place.key("file"))
+    return _pose_keyframes(spec, pose)
+
+
+def _pose_keyframes(table: _Table, pose: Pose) -> Keyframes:
+    """Rows [t, x, y, yaw_deg] (z, roll, pitch from the body's pose) or [t, x, y, z, roll_deg, pitch_deg, yaw_deg]."""
+    place = table.place.key("keyframes")
+    raw = table.raw("keyframes")
+    if not isinstance(raw, list) or not raw:
+        raise place.error(f"expected a non-empty list of [t, x, y, yaw_deg] or [t, x, y, z, roll_deg, pitch_deg, yaw_deg], got {_show(raw)}")
+    rows: list[list[float]] = []
+    for position, row in enumerate(raw):
+        row_place = place.index(position)
+        expected = len(raw[0]) if isinstance(raw[0], list) and len(raw[0]) in (PLANAR_ROW, FULL_ROW) else None
+        if not isinstance(row, list) or len(row) not in (PLANAR_ROW, FULL_ROW) or (expected and len(row) != expected):
+            wanted = f"{expected} numbers like row 0" if expected else f"{PLANAR_ROW} numbers [t, x, y, yaw_deg] or {FULL_ROW} [t, x, y, z, roll_deg, pitch_deg, yaw_deg]"
+            got = f"{len(row)} numbers" if isinstance(row, list) else _show(row)
+            raise row_place.error(f"expected {wanted}, got {got}")
+        numbers = [_as_number(item, row_place.index(column)) for column, item in enumerate(row)]
+        if rows and numbers[0] < rows[-1][0]:
+            raise row_place.index(0).error(f"keyframe times must not decrease, got {_show(row[0])} after {_show(raw[position - 1][0])}")
+        rows.append(numbers)
+    table_rows = np.array(rows, dtype=float)
+    if table_rows.shape[1] == PLANAR_ROW:
+        z, (roll, pitch, _) = pose.position[2], pose.rotation_deg
+        count = len(table_rows)
+        positions = np.column_stack([table_rows[:, 1], table_rows[:, 2], np.full(count, z)])
+        angles = np.column_stack([np.full(count, roll), np.full(count, pitch), table_rows[:, 3]])
+    else:
+        positions, angles = table_rows[:, 1:4], table_rows[:, 4:7]
+    return _frozen_keyframes(table_rows[:, 0], positions, euler_quaternion(angles))
+
+
+def _frozen_keyframes(times: np.ndarray, positions: np.ndarray, quaternions: np.ndarray) -> Keyframes:
+    for array in (times, positions, quaternions):
+        array.flags.writeable = False
+    return Keyframes(times, positions, quaternions)
+
+
+def _tum_file(path: Path, place: _Place) -> Keyframes:
+    """A TUM trajectory: lines `t x y z qx qy qz qw`; blank lines and `#` comments skipped. Bounded: a file
+    over TUM_MAX_BYTES or TUM_MAX_LINES is refused before it is parsed."""
+    try:
+        with path.open("rb") as stream:
+            data = stream.read(TUM_MAX_BYTES + 1)
+    except OSError as error:
+        raise place.error(f"cannot read {path.name}: {error.strerror}") from error
+    if len(data) > TUM_MAX_BYTES:
+        raise place.error(f"{path.name} is larger than {TUM_MAX_BYTES // (1024 * 1024)} MiB")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise place.error(f"{path.name}: not UTF-8 text (byte {error.start})") from error
+    lines = text.splitlines()
+    if len(lines) > TUM_MAX_LINES:
+        raise place.error(f"{path.name} has more than {TUM_MAX_LINES} lines")
+    rows: list[list[float]] = []
+    for number, line in enumerate(lines, start=1):
+        fields = line.split()
+        if not fields or fields[0].startswith("#"):
+            continue
+        where = f"{path.name} line {number}"
+        if len(fields) != TUM_NUMBERS:
+            raise place.error(f"{where}: expected {TUM_NUMBERS} numbers, got {len(fields)}")
+        try:
+            values = [float(field) for field in fields]
+        except ValueError:
+            bad = next(field for field in fields if not _parses_as_float(field))
+            raise place.error(f"{where}: not a number: {_show(bad[:20])}") from None
+        if not all(math.isfinite(value) for value in values):
+            raise place.error(f"{where}: numbers must be finite")
+        if math.hypot(*values[4:8]) < 1e-9:
+            raise place.error(f"{where}: quaternion qx qy qz qw must not be zero")
+        if rows and values[0] < rows[-1][0]:
+            raise place.error(f"{where}: times must not decrease, got {fields[0]} after {rows[-1][0]:g}")
+        rows.append(values)
+    if not rows:
+        raise place.error(f"{path.name} holds no pose (lines 't x y z qx qy qz qw')")
+    table = np.array(rows)
+    quaternions = table[:, 4:8] / np.linalg.norm(table[:, 4:8], axis=1, keepdims=True)
+    return _frozen_keyframes(table[:, 0].copy(), table[:, 1:4].copy(), quaternions)
+
+
+def _parses_as_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True

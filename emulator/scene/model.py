@@ -10,9 +10,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping, Union
+from typing import TYPE_CHECKING, Any, Mapping, Union
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from emulator.scene.bodies import Body
 
 Vec3 = tuple[float, float, float]
 
@@ -89,6 +92,7 @@ class SceneObject:
     shape: Shape
     pose: Pose
     material: str
+    body: str | None = None  # riding on this body: `pose` is then relative to the body's frame
 
 
 @dataclass(frozen=True)
@@ -96,7 +100,8 @@ class Density:
     """Smoke density as a piecewise-linear function of time (the paper's Kismet curves).
 
     A constant density is one keyframe. Before the first and after the last
-    keyframe the density holds the end value.
+    keyframe the density holds the end value. Times do not decrease; two
+    keyframes at one time are a step (the later one holds from that instant on).
     """
 
     keyframes: tuple[tuple[float, float], ...]
@@ -104,7 +109,17 @@ class Density:
     def at(self, time_s: float | np.ndarray) -> float | np.ndarray:
         times = np.array([k[0] for k in self.keyframes], dtype=float)
         values = np.array([k[1] for k in self.keyframes], dtype=float)
-        result = np.interp(time_s, times, values)
+        steps = np.flatnonzero(np.diff(times) == 0) + 1  # each step's later row
+        if not len(steps):
+            result = np.interp(time_s, times, values)
+        else:  # interpolate within the run of rows between steps that holds t
+            query = np.asarray(time_s, dtype=float)
+            run = np.searchsorted(times[steps], query, side="right")
+            bounds = np.concatenate([[0], steps, [len(times)]])
+            result = np.zeros(query.shape)
+            for index, (low, high) in enumerate(zip(bounds[:-1], bounds[1:])):
+                inside = run == index
+                result = np.where(inside, np.interp(query, times[low:high], values[low:high]), result)
         return float(result) if np.ndim(result) == 0 else result
 
 
@@ -146,6 +161,7 @@ class SensorSpec:
     pose: Pose
     endpoints: tuple[str, ...]
     options: Mapping[str, Any] = field(default_factory=dict)
+    body: str | None = None  # riding on this body: `pose` is then relative to the body's frame
 
 
 @dataclass(frozen=True)
@@ -161,6 +177,13 @@ class Scene:
     regions: tuple[SmokeRegion, ...]
     plumes: tuple[Plume, ...]
     sensors: tuple[SensorSpec, ...]
+    bodies: tuple[Body, ...] = ()
+
+    def body(self, name: str) -> Body:
+        for body in self.bodies:
+            if body.name == name:
+                return body
+        raise KeyError(f"no body named {name!r}")
 
     def sensor(self, name: str) -> SensorSpec:
         for spec in self.sensors:

@@ -9,13 +9,14 @@ echo within the sensor's physical reach (80 m) (telegram listing §10.8).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from emulator.optics import PreparedBeams, World
+from emulator.optics import BeamHits, PreparedBeams, World
 from emulator.scene.model import Scene, SensorSpec
-from emulator.sensors.beam_geometry import scan_plane_rays
+from emulator.sensors.mount import SensorMount
 from emulator.sensors.response import Beams, response_model, values_at_instants
 from emulator.sensors.scan import Scan, simulated_instant
 
@@ -30,6 +31,33 @@ NO_ECHO = 8191
 
 def device_angles_deg(start_deg: float, step_deg: float, count: int) -> np.ndarray:
     return start_deg + step_deg * np.arange(count)
+
+
+def beam_offsets_s(device_angles: np.ndarray, step_deg: float) -> np.ndarray:
+    """When each device angle of a window is measured, relative to the scan's time stamp (≤ 0).
+
+    The mirror sweeps 360° per revolution (PERIOD_S), the field 0°..180° in its
+    first half; an interlaced scan measures the 1° grid shifted by r · step in
+    revolution r (0.5°: integer angles first, then the half degrees; 0.25°:
+    .0, .25, .5, .75; telegram listing §10.10). The scan completes (its time
+    stamp) when the mirror reaches 180° in its last revolution.
+    """
+    revolutions = REVOLUTIONS_PER_SCAN.get(step_deg, 1)
+    revolution = np.rint(np.mod(device_angles, 1.0) / step_deg).astype(np.int64) % revolutions if revolutions > 1 else 0
+    offsets = -(revolutions - 1 - revolution) * PERIOD_S - (180.0 - device_angles) / 360.0 * PERIOD_S
+    offsets = np.asarray(offsets, dtype=float) * np.ones(len(device_angles))
+    offsets.flags.writeable = False
+    return offsets
+
+
+@dataclass(frozen=True)
+class _Window:
+    """A window's sensor-frame angles and measuring offsets (N,); a fixed sensor's beams prepared
+    against the fixed geometry (None when the sensor moves: its beams are cast per scan)."""
+
+    angles_rad: np.ndarray
+    offsets_s: np.ndarray
+    prepared: PreparedBeams | None
 
 
 def configured_window(options: Mapping[str, Any]) -> dict[str, Any]:
@@ -55,18 +83,38 @@ class LmsSensor:
         self.scene, self.spec, self.world = scene, spec, world
         self.name = spec.name
         self._response = response_model(scene.model)
-        self._rays: dict[tuple[float, float, int], tuple[np.ndarray, PreparedBeams]] = {}
+        self.mount = SensorMount(scene, spec, world.bodies)
+        self._fixed_spec = self.mount.fixed_spec
+        self._rays: dict[tuple[float, float, int], _Window] = {}
 
-    def _beams(self, start_deg: float, step_deg: float, count: int) -> tuple[np.ndarray, PreparedBeams]:
-        """Sensor-frame angles of a window and its beams prepared against the fixed geometry
-        (a device uses few windows, and objects never move: cached)."""
+    def _beams(self, start_deg: float, step_deg: float, count: int) -> _Window:
+        """A window's angles, offsets and (fixed sensor) beams prepared against the fixed geometry
+        (a device uses few windows, and fixed objects never move: cached)."""
         key = (start_deg, step_deg, count)
         if key not in self._rays:
-            angles_rad = np.radians(device_angles_deg(start_deg, step_deg, count) - 90.0)
+            device_angles = device_angles_deg(start_deg, step_deg, count)
+            angles_rad = np.radians(device_angles - 90.0)
             angles_rad.flags.writeable = False
-            origins, directions = scan_plane_rays(self.spec.pose, angles_rad)
-            self._rays[key] = (angles_rad, self.world.prepare(origins, directions, REACH_M))
+            prepared = None
+            if not self.mount.moving:
+                origins, directions = self.mount.fixed_rays(angles_rad)
+                prepared = self.world.prepare(origins, directions, REACH_M)
+            self._rays[key] = _Window(angles_rad, beam_offsets_s(device_angles, step_deg), prepared)
         return self._rays[key]
+
+    def _cast(self, window: _Window, time_s: float) -> tuple[BeamHits, Beams]:
+        """The window's hits at `time_s`, each beam at the instant the mirror measures it."""
+        beam_times = time_s + window.offsets_s
+        prepared = window.prepared
+        if prepared is not None:
+            hits = self.world.cast_prepared(prepared, time_s, beam_times)
+            return hits, Beams(self.scene, self._fixed_spec, self.world, time_s, window.angles_rad, prepared.origins, prepared.directions)
+        rays = self.mount.moving_rays(window.angles_rad, beam_times)
+        hits = self.world.cast_prepared(self.world.prepare(rays.origins, rays.directions, REACH_M), time_s, beam_times)
+        beams = Beams(
+            self.scene, self.spec, self.world, time_s, window.angles_rad, rays.origins, rays.directions, rays.rotations, beam_times
+        )
+        return hits, beams
 
     def scan(
         self, time_s: float, *, start_deg: float = 0.0, step_deg: float = 0.5, count: int = 361, unit: str = "mm"
@@ -87,12 +135,11 @@ class LmsSensor:
         (`physical`) shares each pass among them, which costs far less per scan."""
         if unit not in UNITS_PER_M:
             raise ValueError(f"unit must be one of {sorted(UNITS_PER_M)}, got {unit!r}")
-        angles_rad, prepared = self._beams(start_deg, step_deg, count)
+        window = self._beams(start_deg, step_deg, count)
         instants = [simulated_instant(t) for t in times_s]
-        hits = [self.world.cast_prepared(prepared, t) for t in instants]
-        beams = [Beams(self.scene, self.spec, self.world, t, angles_rad, prepared.origins, prepared.directions) for t in instants]
+        hits, beams = zip(*(self._cast(window, t) for t in instants)) if instants else ((), ())
         values = values_at_instants(self._response, "lms_values", hits, beams, unit).astype(np.int64, copy=False)
-        return [Scan(self.name, MODEL, t, angles_rad, row, unit) for t, row in zip(times_s, values)]
+        return [Scan(self.name, MODEL, t, window.angles_rad, row, unit, window.offsets_s) for t, row in zip(times_s, values)]
 
     def configured_scan(self, time_s: float) -> Scan:
         """The scan the scene's options select (`configured_window`), at `time_s`."""

@@ -33,7 +33,13 @@ PRESET_MODULES = {"formsma2011": "emulator.sensors.formsma2011", "physical": "em
 
 @dataclass(frozen=True)
 class Beams:
-    """The beams of one scan: sensor-frame angles (N,), world origins and unit directions (N, 3)."""
+    """The beams of one scan: sensor-frame angles (N,), world origins and unit directions (N, 3).
+
+    A sensor that does not move leaves `rotations` None: `sensor.pose` places
+    every beam. A moving one gives each beam's sensor → world rotation
+    (N, 3, 3) and instant `beam_times_s` (N,), so a model casting more rays
+    (sub-rays of a footprint) casts them from where the sensor was.
+    """
 
     scene: Scene
     sensor: SensorSpec
@@ -42,6 +48,8 @@ class Beams:
     angles_rad: np.ndarray
     origins: np.ndarray
     directions: np.ndarray
+    rotations: np.ndarray | None = None
+    beam_times_s: np.ndarray | None = None
 
 
 def apply_model_override(scene: Scene, model: str | None) -> Scene:
@@ -71,7 +79,18 @@ def values_at_instants(
     """`model.<name>` (`urg_values` or `lms_values`) at several instants, (K, N): in one pass where
     the preset offers `<name>_at`, else one instant after another."""
     batched = getattr(model, f"{name}_at", None)
-    if batched is not None:
+    if batched is not None and _same_geometry(hits, beams):
         return np.asarray(batched(hits, beams, *args))
+    if batched is not None:  # moving beams or solids: each instant has its own geometry
+        return np.concatenate([np.asarray(batched((h,), (b,), *args)) for h, b in zip(hits, beams)])
     single = getattr(model, name)
     return np.stack([np.asarray(single(h, b, *args)) for h, b in zip(hits, beams)])
+
+
+def _same_geometry(hits: Sequence[BeamHits], beams: Sequence[Beams]) -> bool:
+    """Whether every instant casts the same beams against the same solids (a batch may then share them)."""
+    first_hits, first_beams = hits[0], beams[0]
+    return all(
+        h.solid_range_m is first_hits.solid_range_m and b.origins is first_beams.origins and b.directions is first_beams.directions
+        for h, b in zip(hits, beams)
+    )

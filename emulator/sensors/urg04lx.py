@@ -14,9 +14,9 @@ from typing import Sequence
 
 import numpy as np
 
-from emulator.optics import World
+from emulator.optics import BeamHits, World
 from emulator.scene.model import Scene, SensorSpec
-from emulator.sensors.beam_geometry import scan_plane_rays
+from emulator.sensors.mount import SensorMount
 from emulator.sensors.response import Beams, response_model, values_at_instants
 from emulator.sensors.scan import Scan, simulated_instant
 
@@ -33,6 +33,18 @@ NO_ECHO = 0
 LOW_INTENSITY = 1
 NON_MEASURABLE = 19
 OUTSIDE_VALID_AREA = NO_ECHO
+
+
+def step_offsets_s() -> np.ndarray:
+    """When each step 0..768 is measured, relative to the scan's time stamp (read-only).
+
+    The mirror turns 2π/1024 per step in 100 ms; the scan completes (its time
+    stamp) when the last step, 768, is measured, so step s is measured
+    (768 − s) · 100 ms / 1024 earlier.
+    """
+    offsets = (np.arange(STEPS) - (STEPS - 1)) * (PERIOD_S / STEPS_PER_REVOLUTION)
+    offsets.flags.writeable = False
+    return offsets
 
 
 def step_angles_rad() -> np.ndarray:
@@ -54,8 +66,14 @@ class UrgSensor:
         self.angles_rad = step_angles_rad()
         self._valid = slice(FIRST_VALID_STEP, LAST_VALID_STEP + 1)
         self._valid_angles = self.angles_rad[self._valid]
-        self._origins, self._directions = scan_plane_rays(spec.pose, self._valid_angles)
-        self._prepared = world.prepare(self._origins, self._directions, MAX_RANGE_M)  # objects never move
+        self.offsets_s = step_offsets_s()
+        self._valid_offsets = self.offsets_s[self._valid]
+        self.mount = SensorMount(scene, spec, world.bodies)
+        self._fixed_spec = self.mount.fixed_spec
+        self._prepared = None
+        if not self.mount.moving:
+            self._origins, self._directions = self.mount.fixed_rays(self._valid_angles)
+            self._prepared = world.prepare(self._origins, self._directions, MAX_RANGE_M)  # fixed geometry never moves
         self._response = response_model(scene.model)
 
     def scan(self, time_s: float) -> Scan:
@@ -66,11 +84,24 @@ class UrgSensor:
         """`scan` at each of `times_s`, computed together: a preset that can (`physical`)
         shares each pass among them, which costs far less per scan."""
         instants = [simulated_instant(t) for t in times_s]
-        hits = [self.world.cast_prepared(self._prepared, t) for t in instants]
-        beams = [Beams(self.scene, self.spec, self.world, t, self._valid_angles, self._origins, self._directions) for t in instants]
+        hits, beams = zip(*(self._cast(t) for t in instants)) if instants else ((), ())
         values = np.full((len(instants), STEPS), OUTSIDE_VALID_AREA, dtype=np.int64)
         values[:, self._valid] = values_at_instants(self._response, "urg_values", hits, beams)
-        return [Scan(self.name, MODEL, t, self.angles_rad, row, "mm") for t, row in zip(times_s, values)]
+        return [Scan(self.name, MODEL, t, self.angles_rad, row, "mm", self.offsets_s) for t, row in zip(times_s, values)]
+
+    def _cast(self, time_s: float) -> tuple[BeamHits, Beams]:
+        """The valid steps' hits at `time_s`, each beam at the instant its step is measured."""
+        beam_times = time_s + self._valid_offsets
+        if self._prepared is not None:
+            hits = self.world.cast_prepared(self._prepared, time_s, beam_times)
+            return hits, Beams(self.scene, self._fixed_spec, self.world, time_s, self._valid_angles, self._origins, self._directions)
+        rays = self.mount.moving_rays(self._valid_angles, beam_times)
+        prepared = self.world.prepare(rays.origins, rays.directions, MAX_RANGE_M)
+        hits = self.world.cast_prepared(prepared, time_s, beam_times)
+        beams = Beams(
+            self.scene, self.spec, self.world, time_s, self._valid_angles, rays.origins, rays.directions, rays.rotations, beam_times
+        )
+        return hits, beams
 
     def configured_scan(self, time_s: float) -> Scan:
         """The same as `scan`: the URG-04LX has one scan (its window is chosen by the protocol)."""

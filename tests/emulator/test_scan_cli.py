@@ -76,8 +76,10 @@ def scan(*args: str) -> dict:
 
 def test_urg_scan_json(scene_file):
     out = scan(str(scene_file), "--sensor", "urg", "--time", "1")
-    assert set(out) == {"sensor", "model", "time_s", "unit", "angles_deg", "values", "ranges_m"}
+    assert set(out) == {"sensor", "model", "time_s", "unit", "angles_deg", "values", "ranges_m", "pose", "times_s"}
     assert (out["sensor"], out["model"], out["time_s"], out["unit"]) == ("urg", "urg-04lx", 1.0, "mm")
+    assert len(out["times_s"]) == 769 and out["times_s"][-1] == 1.0  # the last step completes the scan
+    assert out["times_s"][0] == pytest.approx(1.0 - 768 * 0.1 / 1024, abs=1e-9)
     assert len(out["angles_deg"]) == len(out["values"]) == len(out["ranges_m"]) == 769
     assert out["angles_deg"][384] == 0.0 and out["angles_deg"][0] == -135.0
     assert out["values"][384] == 3000 and out["ranges_m"][384] == 3.0

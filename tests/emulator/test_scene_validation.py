@@ -20,7 +20,7 @@ MATERIAL_KEY_LIST = ", ".join(field.name for field in dataclasses.fields(Materia
 
 CASES = [
     # top level and [scene]
-    ("colour = 1", "colour: unknown key (expected one of: scene, materials, objects, smoke, sensors)"),
+    ("colour = 1", "colour: unknown key (expected one of: scene, materials, bodies, objects, smoke, sensors)"),
     ('[scene]\nnmae = "a"',
      "scene.nmae: unknown key (expected one of: name, description, seed, model, density_to_extinction)"),
     ("scene = 3", "scene: expected a table, got 3"),
@@ -73,7 +73,7 @@ CASES = [
     (OBJECT + 'sphere = { radius = 1 }\nmaterial = "gold"',
      'objects[0].material: unknown material "gold" (known: black_velvet, default, gold_paper, rusty_steel, white_paper)'),
     (OBJECT + "sphere = { radius = 1 }\ncolour = 1",
-     "objects[0].colour: unknown key (expected one of: name, box, sphere, cylinder, mesh, position, rotation_deg, material)"),
+     "objects[0].colour: unknown key (expected one of: name, box, sphere, cylinder, mesh, position, rotation_deg, material, body)"),
     ("[[objects]]\nsphere = { radius = 1 }", "objects[0].name: missing required key"),
     (OBJECT + "sphere = { radius = 1 }\n" + OBJECT + "sphere = { radius = 2 }",
      'objects[1].name: duplicate name "wall" (also objects[0])'),
@@ -89,10 +89,8 @@ CASES = [
      "smoke.regions[0].density.keyframes: expected a non-empty list of [time, density], got []"),
     (REGION + "density = { keyframes = [[0, 0.0], [5]] }",
      "smoke.regions[0].density.keyframes[1]: expected [time, density], got [5]"),
-    (REGION + "density = { keyframes = [[0, 0.0], [10, 0.1], [10, 0.2]] }",
-     "smoke.regions[0].density.keyframes[2][0]: keyframe times must increase strictly, got 10 after 10"),
     (REGION + "density = { keyframes = [[0, 0.0], [10, 0.1], [5, 0.2]] }",
-     "smoke.regions[0].density.keyframes[2][0]: keyframe times must increase strictly, got 5 after 10"),
+     "smoke.regions[0].density.keyframes[2][0]: keyframe times must not decrease, got 5 after 10"),
     (REGION + "density = { keyframes = [[0, -1]] }", "smoke.regions[0].density.keyframes[0][1]: must be >= 0, got -1"),
     (REGION + "density = { keyframes = [[nan, 0]] }", "smoke.regions[0].density.keyframes[0][0]: must be finite, got nan"),
     (REGION + 'density = { keyframes = [[0, "thick"]] }',
@@ -118,7 +116,7 @@ CASES = [
     # [[sensors]]
     ('[[sensors]]\nname = "front"', "sensors[0].model: missing required key"),
     ('[[sensors]]\nname = "front"\nmodel = "utm-30lx"', 'sensors[0].model: must be one of "urg-04lx", "lms200", got "utm-30lx"'),
-    (URG + "range = 4", "sensors[0].range: unknown key (expected one of: name, model, position, rotation_deg, endpoints, "
+    (URG + "range = 4", "sensors[0].range: unknown key (expected one of: name, model, body, position, rotation_deg, endpoints, "
      "boot_protocol, serial, baud, angle_deg, resolution_deg, units, type_string, firmware_profile)"),
     (URG + URG, 'sensors[1].name: duplicate name "urg" (also sensors[0])'),
     (URG + 'endpoints = "pty:ttyURG0"', 'sensors[0].endpoints: expected a list of endpoints, got "pty:ttyURG0"'),

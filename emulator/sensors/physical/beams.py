@@ -275,7 +275,7 @@ def _footprint_surfaces(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, 
     if len(edge_rows):
         offsets = ((np.arange(sub_rays) + 0.5) / sub_rays - 0.5) * receiver.footprint_rad
         angles = beams.angles_rad[edge_rows][:, None] + offsets
-        solids = _sub_ray_solids(beams, angles, hits.max_range_m)
+        solids = _sub_ray_solids(beams, edge_rows, angles, hits.max_range_m)
         ranges[edge_rows], objects[edge_rows], reflectivity[edge_rows], cosine[edge_rows] = solids
         used[edge_rows] = True
     present = used & np.isfinite(ranges)
@@ -354,12 +354,17 @@ _SUB_RAY_CACHE: weakref.WeakKeyDictionary[World, dict[tuple, _SubRaySolids]] = w
 _SUB_RAY_CACHE_SIZE = 64
 
 
-def _sub_ray_solids(beams: Beams, angles_rad: np.ndarray, max_range_m: float) -> _SubRaySolids:
-    """Range, object, reflectivity and |cos incidence| (R, S) of sub-rays at sensor-frame `angles_rad` (R, S).
+def _sub_ray_solids(beams: Beams, rows: np.ndarray, angles_rad: np.ndarray, max_range_m: float) -> _SubRaySolids:
+    """Range, object, reflectivity and |cos incidence| (R, S) of sub-rays of beams `rows` at sensor-frame
+    `angles_rad` (R, S).
 
-    Solid objects never move, so the result depends only on the world, the
-    sensor's pose and the angles: it is cast once and kept per world.
+    When nothing moves, the result depends only on the world, the sensor's pose
+    and the angles: it is cast once and kept per world. A moving sensor casts
+    each beam's sub-rays from its pose at the beam's instant, and moving solids
+    are met at that instant: cast afresh.
     """
+    if beams.rotations is not None or beams.world.moving:
+        return _moving_sub_ray_solids(beams, rows, angles_rad, max_range_m)
     cache = _SUB_RAY_CACHE.setdefault(beams.world, {})
     key = (beams.sensor.pose, angles_rad.tobytes(), angles_rad.shape, max_range_m)
     if key not in cache:
@@ -375,6 +380,26 @@ def _sub_ray_solids(beams: Beams, angles_rad: np.ndarray, max_range_m: float) ->
             hits.cos_incidence.reshape(shape),
         )
     return cache[key]
+
+
+def _moving_sub_ray_solids(beams: Beams, rows: np.ndarray, angles_rad: np.ndarray, max_range_m: float) -> _SubRaySolids:
+    shape = angles_rad.shape
+    flat = angles_rad.ravel()
+    owner = np.repeat(rows, shape[1])  # the beam each sub-ray belongs to
+    local = np.stack([np.cos(flat), np.sin(flat), np.zeros_like(flat)], axis=1)
+    if beams.rotations is not None:
+        directions = np.einsum("nij,nj->ni", beams.rotations[owner], local)
+    else:
+        directions = local @ beams.sensor.pose.rotation_matrix().T
+    origins = beams.origins[owner]
+    times = beams.beam_times_s[owner] if beams.beam_times_s is not None else None
+    hits = beams.world.cast(origins, directions, max_range_m, beams.time_s, times)
+    return (
+        hits.solid_range_m.reshape(shape),
+        hits.object_index.reshape(shape),
+        hits.reflectivity.reshape(shape),
+        hits.cos_incidence.reshape(shape),
+    )
 
 
 def _material_arrays(beams: Beams, objects: np.ndarray, params: PhysicalParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -1,0 +1,286 @@
+"""Bodies (SCENE_FORMAT.md "Bodies"): rigid frames that move, and their poses as pure functions of t.
+
+A body's pose at any instant comes from its trajectory alone (plus, for a live
+body, the pose events recorded so far), so a scan evaluates it directly for
+every beam's own instant: `BodyPoses.frames(body, times)` takes an array of
+times and returns positions (T, 3) and rotations (T, 3, 3), body → world, in
+one vectorised pass (no per-beam Python).
+
+- `Keyframes`: rows (t, position, quaternion). Between rows the position is
+  linear and the rotation follows the shortest arc (slerp); before the first
+  and after the last row the pose is held; two rows at one time are a jump
+  (the later row holds from that instant on).
+- `LIVE`: the pose is driven from outside while `serve` runs. The seam for the
+  control API is `BodyPoses.add_live_pose(body, time_s, pose)`: it appends one
+  event to the body's ordered event list (times must not decrease), and
+  `live_frames(times, events, initial)` is the pure function that turns that
+  list into poses: each event's pose holds from its time until the next
+  event's, the body's scene pose before the first. Evaluating instant t never
+  looks at events after t, so replaying the same event log gives the same scans.
+
+Quaternions are (x, y, z, w) as in TUM files; rotations compose as
+R = Rz(yaw) · Ry(pitch) · Rx(roll), as `Pose.rotation_matrix`.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+from typing import Union
+
+import numpy as np
+
+from emulator.scene.model import Pose
+
+_SLERP_LINEAR_BELOW = 1e-9  # sin of the arc under which slerp falls back to a normalised lerp
+
+
+# --------------------------------------------------------------------------- quaternions (x, y, z, w)
+
+
+def euler_quaternion(rotation_deg: np.ndarray) -> np.ndarray:
+    """Quaternions (..., 4) of roll, pitch, yaw in degrees (..., 3): q = qz(yaw) · qy(pitch) · qx(roll)."""
+    half = np.radians(np.asarray(rotation_deg, dtype=float)) * 0.5
+    cr, sr = np.cos(half[..., 0]), np.sin(half[..., 0])
+    cp, sp = np.cos(half[..., 1]), np.sin(half[..., 1])
+    cy, sy = np.cos(half[..., 2]), np.sin(half[..., 2])
+    return np.stack(
+        [
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+            cr * cp * cy + sr * sp * sy,
+        ],
+        axis=-1,
+    )
+
+
+def quaternion_matrix(quaternions: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of unit quaternions (..., 4)."""
+    x, y, z, w = np.moveaxis(np.asarray(quaternions, dtype=float), -1, 0)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=-1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=-1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=-1),
+        ],
+        axis=-2,
+    )
+
+
+def matrix_quaternion(rotation: np.ndarray) -> np.ndarray:
+    """The unit quaternion (4,) of one rotation matrix (3, 3), with w >= 0 (Shepperd's method)."""
+    m = np.asarray(rotation, dtype=float)
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    if trace > 0:
+        s = 2.0 * np.sqrt(1.0 + trace)
+        q = [(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s]
+    elif m[0, 0] >= m[1, 1] and m[0, 0] >= m[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = [0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s]
+    elif m[1, 1] >= m[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        q = [(m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s]
+    else:
+        s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        q = [(m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s, (m[1, 0] - m[0, 1]) / s]
+    quaternion = np.array(q)
+    quaternion /= np.linalg.norm(quaternion)
+    return -quaternion if quaternion[3] < 0 else quaternion
+
+
+def matrix_euler_deg(rotation: np.ndarray) -> tuple[float, float, float]:
+    """Roll, pitch, yaw (degrees) of one rotation matrix, inverse of `Pose.rotation_matrix`."""
+    m = np.asarray(rotation, dtype=float)
+    pitch = np.arcsin(np.clip(-m[2, 0], -1.0, 1.0))
+    if abs(m[2, 0]) < 1.0 - 1e-12:
+        roll, yaw = np.arctan2(m[2, 1], m[2, 2]), np.arctan2(m[1, 0], m[0, 0])
+    else:  # gimbal lock: only roll ± yaw is defined; report it all as yaw
+        roll, yaw = 0.0, np.arctan2(-m[0, 1], m[1, 1])
+    return float(np.degrees(roll)), float(np.degrees(pitch)), float(np.degrees(yaw))
+
+
+def slerp(q0: np.ndarray, q1: np.ndarray, fraction: np.ndarray) -> np.ndarray:
+    """Shortest-arc interpolation (T, 4) from q0 (T, 4) to q1 (T, 4) at `fraction` (T,) in [0, 1]."""
+    dot = np.einsum("ij,ij->i", q0, q1)
+    q1 = np.where((dot < 0)[:, None], -q1, q1)
+    dot = np.minimum(np.abs(dot), 1.0)
+    arc = np.arccos(dot)
+    sin_arc = np.sin(arc)
+    near = sin_arc < _SLERP_LINEAR_BELOW
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w0 = np.where(near, 1.0 - fraction, np.sin((1.0 - fraction) * arc) / sin_arc)
+        w1 = np.where(near, fraction, np.sin(fraction * arc) / sin_arc)
+    result = w0[:, None] * q0 + w1[:, None] * q1
+    return result / np.linalg.norm(result, axis=1, keepdims=True)
+
+
+# --------------------------------------------------------------------------- trajectories
+
+
+@dataclass(frozen=True, eq=False)
+class Keyframes:
+    """Poses at times: `times` (K,) non-decreasing, `positions` (K, 3), unit `quaternions` (K, 4)."""
+
+    times: np.ndarray
+    positions: np.ndarray
+    quaternions: np.ndarray
+
+
+@dataclass(frozen=True)
+class Live:
+    """The pose comes from outside while `serve` runs (control API): see `BodyPoses.add_live_pose`."""
+
+
+LIVE = Live()
+
+Trajectory = Union[Keyframes, Live]
+
+
+@dataclass(frozen=True, eq=False)
+class Frames:
+    """Poses of one frame at T instants: `positions` (T, 3), `rotations` (T, 3, 3) local → world."""
+
+    positions: np.ndarray
+    rotations: np.ndarray
+
+    def then(self, local: Pose) -> Frames:
+        """The frames of something mounted at `local` in these frames (a sensor on a body)."""
+        rotation = local.rotation_matrix()
+        positions = self.positions + self.rotations @ np.asarray(local.position, dtype=float)
+        return Frames(positions, self.rotations @ rotation)
+
+    def at(self, index: int) -> Pose:
+        """Instant `index` as a `Pose` (position, roll/pitch/yaw in degrees)."""
+        return Pose(tuple(float(v) for v in self.positions[index]), matrix_euler_deg(self.rotations[index]))  # type: ignore[arg-type]
+
+
+def keyframe_frames(keyframes: Keyframes, times_s: np.ndarray) -> Frames:
+    """The keyframed pose at each of `times_s` (T,): linear position, slerped rotation, held outside."""
+    times = np.asarray(times_s, dtype=float).reshape(-1)
+    last = len(keyframes.times) - 1
+    after = np.searchsorted(keyframes.times, times, side="right") - 1  # the last row at or before t: a jump's later row
+    start = np.clip(after, 0, last)
+    end = np.minimum(start + 1, last)
+    span = keyframes.times[end] - keyframes.times[start]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fraction = np.where(span > 0, (times - keyframes.times[start]) / span, 0.0)
+    fraction = np.clip(np.where(after < 0, 0.0, fraction), 0.0, 1.0)
+    p0, p1 = keyframes.positions[start], keyframes.positions[end]
+    positions = p0 + fraction[:, None] * (p1 - p0)
+    quaternions = slerp(keyframes.quaternions[start], keyframes.quaternions[end], fraction)
+    return Frames(positions, quaternion_matrix(quaternions))
+
+
+@dataclass(frozen=True, eq=False)
+class LiveEvents:
+    """An ordered list of live pose events: `times` (E,), `positions` (E, 3), `quaternions` (E, 4)."""
+
+    times: np.ndarray
+    positions: np.ndarray
+    quaternions: np.ndarray
+
+    @staticmethod
+    def empty() -> LiveEvents:
+        return LiveEvents(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 4)))
+
+
+def live_frames(events: LiveEvents, initial: Pose, times_s: np.ndarray) -> Frames:
+    """The live pose at each of `times_s`: the last event at or before t, `initial` before the first."""
+    times = np.asarray(times_s, dtype=float).reshape(-1)
+    index = np.searchsorted(events.times, times, side="right") - 1
+    positions = np.broadcast_to(np.asarray(initial.position, dtype=float), (len(times), 3)).copy()
+    rotations = np.broadcast_to(initial.rotation_matrix(), (len(times), 3, 3)).copy()
+    seen = index >= 0
+    if seen.any():
+        positions[seen] = events.positions[index[seen]]
+        rotations[seen] = quaternion_matrix(events.quaternions[index[seen]])
+    return Frames(positions, rotations)
+
+
+# --------------------------------------------------------------------------- bodies
+
+
+@dataclass(frozen=True)
+class Body:
+    """A rigid frame: `pose` when no trajectory applies; `trajectory` None (it stays), keyframes or LIVE."""
+
+    name: str
+    pose: Pose = Pose()
+    trajectory: Trajectory | None = None
+
+    @property
+    def moving(self) -> bool:
+        return self.trajectory is not None
+
+
+class _EventLog:
+    """Append-only arrays with amortised O(1) appends; a snapshot never changes after it is taken."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._count = 0
+        self._times = np.zeros(16)
+        self._positions = np.zeros((16, 3))
+        self._quaternions = np.zeros((16, 4))
+
+    def append(self, time_s: float, position: np.ndarray, quaternion: np.ndarray) -> None:
+        with self._lock:
+            if self._count and time_s < self._times[self._count - 1]:
+                raise ValueError(f"live pose at {time_s} s is earlier than the last one ({self._times[self._count - 1]} s)")
+            if self._count == len(self._times):  # grow into new arrays: earlier snapshots keep the old ones
+                self._times = np.concatenate([self._times, np.zeros(self._count)])
+                self._positions = np.concatenate([self._positions, np.zeros((self._count, 3))])
+                self._quaternions = np.concatenate([self._quaternions, np.zeros((self._count, 4))])
+            self._times[self._count] = time_s
+            self._positions[self._count] = position
+            self._quaternions[self._count] = quaternion
+            self._count += 1
+
+    def snapshot(self) -> LiveEvents:
+        with self._lock:
+            n = self._count
+            return LiveEvents(self._times[:n], self._positions[:n], self._quaternions[:n])
+
+
+@dataclass
+class BodyPoses:
+    """Every body's pose at any instants: the scene's trajectories plus the live bodies' events."""
+
+    bodies: tuple[Body, ...]
+    _live: dict[str, _EventLog] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self._by_name = {body.name: body for body in self.bodies}
+        self._live = {body.name: _EventLog() for body in self.bodies if isinstance(body.trajectory, Live)}
+
+    def body(self, name: str) -> Body:
+        return self._by_name[name]
+
+    def frames(self, name: str, times_s: np.ndarray) -> Frames:
+        """Body `name`'s pose at each of `times_s` (T,), vectorised."""
+        body = self._by_name[name]
+        times = np.asarray(times_s, dtype=float).reshape(-1)
+        if isinstance(body.trajectory, Keyframes):
+            return keyframe_frames(body.trajectory, times)
+        if isinstance(body.trajectory, Live):
+            return live_frames(self._live[name].snapshot(), body.pose, times)
+        return Frames(
+            np.broadcast_to(np.asarray(body.pose.position, dtype=float), (len(times), 3)),
+            np.broadcast_to(body.pose.rotation_matrix(), (len(times), 3, 3)),
+        )
+
+    def add_live_pose(self, name: str, time_s: float, pose: Pose) -> None:
+        """Record that live body `name` is at `pose` from `time_s` on (times must not decrease)."""
+        if name not in self._live:
+            raise KeyError(f"no live body named {name!r} (live: {', '.join(self._live) or 'none'})")
+        self._live[name].append(float(time_s), np.asarray(pose.position, dtype=float), euler_quaternion(pose.rotation_deg))
+
+    def live_events(self, name: str) -> LiveEvents:
+        """The events recorded for live body `name` so far."""
+        return self._live[name].snapshot()
+
+
+def mounted_matrix(body: Body | None, local: Pose) -> np.ndarray:
+    """The 4x4 world transform of something at `local` on a body that stays (no trajectory), or on none."""
+    return local.matrix() if body is None else body.pose.matrix() @ local.matrix()

@@ -1,0 +1,313 @@
+"""Bodies (SCENE_FORMAT.md "Bodies"): the format's rules, poses as functions of t, moving sensors and
+solids, each beam cast at the instant its step is measured, and the ground truth beside a scan."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from emulator.errors import SceneError
+from emulator.optics import World
+from emulator.scene import load_scene
+from emulator.scene import loader as scene_loader
+from emulator.scene.bodies import LiveEvents, euler_quaternion, live_frames, matrix_euler_deg
+from emulator.scene.model import Density, Pose
+from emulator.sensors import create_sensor, lms200, urg04lx
+
+ROBOT = '[[bodies]]\nname = "robot"\n'
+RIDER = '[[sensors]]\nname = "urg"\nmodel = "urg-04lx"\nbody = "robot"\n'
+MOVES = "trajectory = { keyframes = [[0, 0, 0, 0], [1, 1, 0, 0]] }\n"
+
+
+def write(directory: Path, text: str, name: str = "x.toml") -> Path:
+    path = directory / name
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+# --------------------------------------------------------------------------- the format's rules
+
+ERRORS = [
+    (ROBOT + "speed = 1\n" + RIDER, "bodies[0].speed: unknown key (expected one of: name, position, rotation_deg, trajectory)"),
+    (ROBOT + MOVES, 'bodies[0].name: body "robot" carries nothing (no sensor or object has body = "robot")'),
+    (ROBOT + MOVES + RIDER.replace('"robot"', '"robto"'), 'sensors[0].body: unknown body "robto" (bodies: robot)'),
+    (ROBOT + MOVES + '[[objects]]\nname = "crate"\nbox = { size = [1, 1, 1] }\nbody = "cart"\n',
+     'objects[0].body: unknown body "cart" (bodies: robot)'),
+    (ROBOT + MOVES + RIDER + ROBOT, 'bodies[1].name: duplicate name "robot" (also bodies[0])'),
+    (ROBOT + "trajectory = { keyframes = [[0, 0, 0, 0], [2, 1, 0, 0], [1, 2, 0, 0]] }\n" + RIDER,
+     "bodies[0].trajectory.keyframes[2][0]: keyframe times must not decrease, got 1 after 2"),
+    (ROBOT + "trajectory = { keyframes = [[0, 0, 0]] }\n" + RIDER,
+     "bodies[0].trajectory.keyframes[0]: expected 4 numbers [t, x, y, yaw_deg] or 7 [t, x, y, z, roll_deg, pitch_deg, yaw_deg], got 3 numbers"),
+    (ROBOT + "trajectory = { keyframes = [[0, 0, 0, 0], [1, 0, 0, 0, 0, 0, 0]] }\n" + RIDER,
+     "bodies[0].trajectory.keyframes[1]: expected 4 numbers like row 0, got 7 numbers"),
+    (ROBOT + 'trajectory = { keyframes = [[0, 0, "x", 0]] }\n' + RIDER,
+     'bodies[0].trajectory.keyframes[0][2]: expected a number, got "x"'),
+    (ROBOT + "trajectory = { keyframes = [] }\n" + RIDER,
+     "bodies[0].trajectory.keyframes: expected a non-empty list of [t, x, y, yaw_deg] or [t, x, y, z, roll_deg, pitch_deg, yaw_deg], got []"),
+    (ROBOT + 'trajectory = "dead"\n' + RIDER,
+     'bodies[0].trajectory: expected "live", { keyframes = [...] } or { file = "run.tum" }, got "dead"'),
+    (ROBOT + 'trajectory = { keyframes = [[0, 0, 0, 0]], file = "a.tum" }\n' + RIDER,
+     "bodies[0].trajectory: needs exactly one of: keyframes, file"),
+    (ROBOT + "trajectory = { speed = 1 }\n" + RIDER, "bodies[0].trajectory.speed: unknown key (expected one of: keyframes, file)"),
+    (ROBOT + 'trajectory = { file = "missing.tum" }\n' + RIDER,
+     "bodies[0].trajectory.file: cannot read missing.tum: No such file or directory"),
+    ('[[smoke.regions]]\nname = "fog"\nbox = { size = [1, 1, 1] }\ndensity = 0.1\nbody = "robot"\n',
+     "smoke.regions[0].body: smoke regions cannot ride on a body (the paper's smoke areas never move)"),
+]
+
+
+@pytest.mark.parametrize(("text", "expected"), ERRORS, ids=[expected for _, expected in ERRORS])
+def test_a_body_rule_broken_is_one_line_naming_file_table_and_key(tmp_path: Path, text: str, expected: str) -> None:
+    with pytest.raises(SceneError) as raised:
+        load_scene(write(tmp_path, text))
+    assert str(raised.value) == f"x.toml: {expected}"
+
+
+TUM_ERRORS = [
+    ("0 0 0 0 0 0 0 1\n\n# comment\n1 0 0 0 0 0 1\n", "run.tum line 4: expected 8 numbers, got 7"),
+    ("0 0 0 0 0 0 0 1\n1 0 0 zero 0 0 0 1\n", 'run.tum line 2: not a number: "zero"'),
+    ("0 0 0 0 0 0 0 1\n1 0 0 nan 0 0 0 1\n", "run.tum line 2: numbers must be finite"),
+    ("2 0 0 0 0 0 0 1\n1 0 0 0 0 0 0 1\n", "run.tum line 2: times must not decrease, got 1 after 2"),
+    ("0 0 0 0 0 0 0 0\n", "run.tum line 1: quaternion qx qy qz qw must not be zero"),
+    ("# nothing\n", "run.tum holds no pose (lines 't x y z qx qy qz qw')"),
+    (b"0 0 0 0 0 0 0 1\n\xff\n", "run.tum: not UTF-8 text (byte 16)"),
+]
+
+
+@pytest.mark.parametrize(("content", "expected"), TUM_ERRORS, ids=[expected for _, expected in TUM_ERRORS])
+def test_a_tum_file_that_does_not_parse_names_its_line(tmp_path: Path, content: str | bytes, expected: str) -> None:
+    (tmp_path / "run.tum").write_bytes(content if isinstance(content, bytes) else content.encode())
+    with pytest.raises(SceneError) as raised:
+        load_scene(write(tmp_path, ROBOT + 'trajectory = { file = "run.tum" }\n' + RIDER))
+    assert str(raised.value) == f"x.toml: bodies[0].trajectory.file: {expected}"
+
+
+def test_a_huge_tum_file_is_refused_before_it_is_parsed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(scene_loader, "TUM_MAX_BYTES", 64)
+    (tmp_path / "run.tum").write_text("0 0 0 0 0 0 0 1\n" * 5)
+    with pytest.raises(SceneError, match=r"^x\.toml: bodies\[0\]\.trajectory\.file: run\.tum is larger than 0 MiB$"):
+        load_scene(write(tmp_path, ROBOT + 'trajectory = { file = "run.tum" }\n' + RIDER))
+    monkeypatch.setattr(scene_loader, "TUM_MAX_BYTES", 1 << 20)
+    monkeypatch.setattr(scene_loader, "TUM_MAX_LINES", 4)
+    with pytest.raises(SceneError, match=r"run\.tum has more than 4 lines$"):
+        load_scene(write(tmp_path, ROBOT + 'trajectory = { file = "run.tum" }\n' + RIDER))
+
+
+# --------------------------------------------------------------------------- poses as functions of t
+
+
+def body_frames(tmp_path: Path, trajectory: str, times: list[float], extra: str = ""):
+    scene = load_scene(write(tmp_path, ROBOT + extra + f"trajectory = {trajectory}\n" + RIDER))
+    return World(scene).bodies.frames("robot", np.array(times))
+
+
+def yaws(frames) -> list[float]:
+    return [matrix_euler_deg(rotation)[2] for rotation in frames.rotations]
+
+
+def test_planar_keyframes_move_linearly_turn_along_the_shortest_arc_and_hold_outside(tmp_path: Path) -> None:
+    frames = body_frames(
+        tmp_path, "{ keyframes = [[1, 0, 0, 170], [3, 4, 2, -170]] }", [0, 1, 2, 2.5, 3, 9],
+        'position = [0, 0, 0.25]\nrotation_deg = [0, 5, 0]\n',
+    )
+    np.testing.assert_allclose(frames.positions, [[0, 0, 0.25], [0, 0, 0.25], [2, 1, 0.25], [3, 1.5, 0.25], [4, 2, 0.25], [4, 2, 0.25]])
+    # 170° → -170° is 20° through 180°, not 340° back through 0°
+    np.testing.assert_allclose(np.mod(yaws(frames), 360.0), [170, 170, 180, 185, 190, 190], atol=1e-9)
+    assert [matrix_euler_deg(r)[1] for r in frames.rotations] == pytest.approx([5.0] * 6)  # pitch from rotation_deg
+
+
+def test_full_rows_set_every_axis_and_two_rows_at_one_time_jump(tmp_path: Path) -> None:
+    frames = body_frames(
+        tmp_path, "{ keyframes = [[0, 0, 0, 0, 0, 0, 0], [2, 2, 0, 1, 0, 0, 0], [2, 5, 5, 1, 0, 0, 90], [4, 5, 5, 1, 0, 0, 90]] }",
+        [1, 1.999999, 2, 3],
+    )
+    np.testing.assert_allclose(frames.positions[[0, 2, 3]], [[1, 0, 0.5], [5, 5, 1], [5, 5, 1]])
+    assert frames.positions[1] == pytest.approx([2, 0, 1], abs=1e-5)  # just before the jump: still on the first leg
+    assert yaws(frames) == pytest.approx([0, 0, 90, 90], abs=1e-9)
+
+
+def test_a_tum_file_is_the_same_trajectory_as_its_keyframes(tmp_path: Path) -> None:
+    q = euler_quaternion(np.array([0.0, 0.0, 90.0]))
+    (tmp_path / "run.tum").write_text(f"# t x y z qx qy qz qw\n0 0 0 0 0 0 0 1\n2 2 2 0 {q[0]} {q[1]} {q[2]} {q[3]}\n")
+    from_file = body_frames(tmp_path, '{ file = "run.tum" }', [0.5, 1, 3])
+    from_rows = body_frames(tmp_path, "{ keyframes = [[0, 0, 0, 0], [2, 2, 2, 90]] }", [0.5, 1, 3])
+    np.testing.assert_allclose(from_file.positions, from_rows.positions, atol=1e-12)
+    np.testing.assert_allclose(from_file.rotations, from_rows.rotations, atol=1e-12)
+
+
+def test_keyframed_smoke_density_steps_where_two_rows_share_a_time() -> None:
+    density = Density(((0.0, 0.0), (10.0, 0.004), (10.0, 0.0), (20.0, 0.002)))
+    assert [density.at(t) for t in (-1.0, 5.0, 10.0, 15.0, 30.0)] == pytest.approx([0.0, 0.002, 0.0, 0.001, 0.002])
+    assert density.at(9.999) == pytest.approx(0.004, rel=1e-3)
+    np.testing.assert_allclose(density.at(np.array([5.0, 10.0, 15.0])), [0.002, 0.0, 0.001])
+
+
+def test_a_live_pose_holds_from_its_event_on_and_never_looks_ahead() -> None:
+    initial = Pose((1.0, 0.0, 0.0))
+    events = LiveEvents(np.array([2.0, 4.0]), np.array([[2.0, 0, 0], [3.0, 0, 0]]), euler_quaternion(np.array([[0, 0, 90.0], [0, 0, 0.0]])))
+    frames = live_frames(events, initial, np.array([0.0, 2.0, 3.9, 4.0, 100.0]))
+    np.testing.assert_allclose(frames.positions[:, 0], [1, 2, 2, 3, 3])
+    assert yaws(frames) == pytest.approx([0, 90, 90, 0, 0], abs=1e-9)
+    truncated = live_frames(LiveEvents(events.times[:1], events.positions[:1], events.quaternions[:1]), initial, np.array([3.9]))
+    np.testing.assert_array_equal(truncated.positions, frames.positions[2:3])  # a later event never changes an earlier instant
+
+
+# --------------------------------------------------------------------------- moving sensors and solids
+
+WALL = '[[objects]]\nname = "wall"\nbox = { size = [0.2, 20, 3] }\nposition = [5.1, 0, 0]\n'
+
+
+def scene_of(tmp_path: Path, text: str, model: str = "formsma2011"):
+    return load_scene(write(tmp_path, f'[scene]\nmodel = "{model}"\n' + text))
+
+
+def test_a_live_body_carries_its_sensor_to_each_recorded_pose(tmp_path: Path) -> None:
+    scene = scene_of(tmp_path, ROBOT + 'trajectory = "live"\n' + RIDER + WALL)
+    world = World(scene)
+    sensor = create_sensor(scene, "urg", world)
+    assert sensor.scan(1.0).values[384] == 5000
+    world.bodies.add_live_pose("robot", 2.0, Pose((2.0, 0.0, 0.0)))
+    assert sensor.scan(1.9).values[384] == 5000 and sensor.scan(2.1).values[384] == 3000
+    with pytest.raises(ValueError, match="earlier than the last one"):
+        world.bodies.add_live_pose("robot", 1.0, Pose())
+
+
+def test_a_sensor_on_a_body_at_rest_gives_exactly_the_fixed_sensors_scans(tmp_path: Path) -> None:
+    base = WALL + '[[smoke.regions]]\nname = "fog"\nbox = { size = [3, 3, 3] }\nposition = [2, 1, 0]\ndensity = 0.001\n'
+    mounted = ROBOT + 'position = [0.5, 0.2, 0]\nrotation_deg = [0, 0, 10]\n' + RIDER.replace('body = "robot"\n', 'body = "robot"\nposition = [0, 0, 0]\n')
+    fixed = '[[sensors]]\nname = "urg"\nmodel = "urg-04lx"\nposition = [0.5, 0.2, 0]\nrotation_deg = [0, 0, 10]\n'
+    for model in ("formsma2011", "physical"):
+        on_body = create_sensor(scene_of(tmp_path, base + mounted, model), "urg").scans([0.1, 0.2, 0.3])
+        alone = create_sensor(scene_of(tmp_path, base + fixed, model), "urg").scans([0.1, 0.2, 0.3])
+        for a, b in zip(on_body, alone):
+            np.testing.assert_array_equal(a.values, b.values)
+
+
+def test_a_solid_on_a_moving_body_is_met_where_the_body_is_and_the_nearer_surface_wins(tmp_path: Path) -> None:
+    door = (
+        '[[bodies]]\nname = "door"\ntrajectory = { keyframes = [[0, 2, -3, 0], [1, 2, 0, 0], [2, 4, 0, 0], [3, 6, 0, 0]] }\n'
+        '[[objects]]\nname = "panel"\nbody = "door"\nbox = { size = [0.1, 1, 2] }\nposition = [0.05, 0, 0]\n'
+    )
+    text = door + WALL + '[[sensors]]\nname = "urg"\nmodel = "urg-04lx"\n'
+    # step 384 is measured 384 steps (37.5 ms) before the scan completes: the door is where it was then
+    expected = [5000, 2000, round(1000 * (2 + 2 * (1.5 - 0.0375 - 1))), 5000]  # clear, door, door, door behind the wall
+    for model, tolerance_mm in (("formsma2011", 0), ("physical", 40)):  # physical: the datasheet's range noise
+        sensor = create_sensor(scene_of(tmp_path, text, model), "urg")
+        ahead = [int(scan.values[384]) for scan in sensor.scans([0.0, 1.0, 1.5, 3.5])]
+        assert ahead == pytest.approx(expected, abs=tolerance_mm)
+        assert ahead == [int(sensor.scan(t).values[384]) for t in (0.0, 1.0, 1.5, 3.5)]  # batched = one at a time
+
+
+def pole_centres(values: np.ndarray, near_mm: int) -> list[float]:
+    """Mean step of each run of steps whose value is below `near_mm` (a pole in front of the far wall)."""
+    steps = np.flatnonzero((values >= 20) & (values < near_mm))
+    runs = np.split(steps, np.flatnonzero(np.diff(steps) > 1) + 1)
+    return [float(run.mean()) for run in runs if len(run)]
+
+
+def test_a_turning_body_skews_its_scan_by_omega_times_the_time_between_the_beams(tmp_path: Path) -> None:
+    """Poles at bearings −45° and +45°: turning at ω (counter-clockwise, as the steps sweep), the beam
+    that sees the second pole is fired Δt later, when the sensor has turned ω·Δt further, so the poles'
+    apparent separation shrinks by ω·Δt (Δt = steps between them × 100 ms / 1024)."""
+    poles = "".join(
+        f'[[objects]]\nname = "pole{i}"\ncylinder = {{ radius = 0.02, height = 2 }}\n'
+        f"position = [{2 * math.cos(math.radians(b)):.9f}, {2 * math.sin(math.radians(b)):.9f}, 0]\n"
+        for i, b in enumerate((-45.0, 45.0))
+    )
+    room = '[[objects]]\nname = "room"\ncylinder = { radius = 4, height = 2 }\nmaterial = "default"\n'
+    omega_deg_s = 180.0
+    rows = ", ".join(f"[{t / 10}, 0, 0, {omega_deg_s * t / 10}]" for t in range(0, 101))  # 18° apart: no arc is ambiguous
+    turning = f"trajectory = {{ keyframes = [{rows}] }}\n"
+    step_deg = 360.0 / 1024
+    separations = {}
+    for name, trajectory in (("still", "trajectory = { keyframes = [[0, 0, 0, 0]] }\n"), ("turning", turning)):
+        scene = scene_of(tmp_path, ROBOT + trajectory + RIDER + poles + room)
+        scan = create_sensor(scene, "urg").scan(4.0)  # turned 720°: facing ahead again as the scan completes
+        first, second = pole_centres(scan.values, 3000)
+        separations[name] = (second - first) * step_deg
+    assert separations["still"] == pytest.approx(90.0, abs=0.5 * step_deg)
+    beams_apart = separations["turning"] / step_deg
+    delta_t = beams_apart * urg04lx.PERIOD_S / urg04lx.STEPS_PER_REVOLUTION
+    predicted = separations["still"] - omega_deg_s * delta_t  # 180°/s × ~24.4 ms ≈ 4.4°
+    assert separations["still"] - separations["turning"] > 4.0
+    assert separations["turning"] == pytest.approx(predicted, abs=step_deg)
+
+
+def test_lms200_interlaced_beams_are_measured_a_revolution_apart(tmp_path: Path) -> None:
+    """At 0.5° the integer angles come from the first mirror revolution, the half degrees from the second
+    (telegram listing §10.10.2): driving at 10 m/s toward a wall, a half-degree beam sees the wall
+    nearer by about 10 m/s × 13.3 ms than its integer-degree neighbour."""
+    speed = 10.0
+    text = (
+        ROBOT + f"trajectory = {{ keyframes = [[0, 0, 0, 0], [0.4, {0.4 * speed}, 0, 0]] }}\n"
+        + '[[sensors]]\nname = "lms"\nmodel = "lms200"\nbody = "robot"\n'
+        + '[[objects]]\nname = "wall"\nbox = { size = [0.2, 40, 3] }\nposition = [10.1, 0, 0]\n'
+    )
+    sensor = create_sensor(scene_of(tmp_path, text), "lms")
+    scan = sensor.scan(0.3, start_deg=0.0, step_deg=0.5, count=361)
+    ahead_integer, ahead_half = int(scan.values[180]), int(scan.values[181])  # 90°, 90.5°
+    expected_mm = speed * lms200.PERIOD_S * (1 - 0.5 / 360) * 1000.0
+    assert ahead_integer - ahead_half == pytest.approx(expected_mm, abs=2.0)
+    np.testing.assert_allclose(scan.offsets_s[[180, 181]], [-lms200.PERIOD_S * 1.25, -lms200.PERIOD_S * (0.25 - 0.5 / 360)])
+
+
+def test_physical_batches_of_a_moving_sensor_equal_its_scans_one_at_a_time(tmp_path: Path) -> None:
+    text = (
+        ROBOT + "trajectory = { keyframes = [[0, 0, 0, 0], [4, 2, 1, 120]] }\n" + RIDER + WALL
+        + '[[sensors]]\nname = "lms"\nmodel = "lms200"\nbody = "robot"\nposition = [0.1, 0, 0.2]\n'
+        + '[[smoke.plumes]]\nname = "fire"\nsource = [2.5, 0, 0]\nrate = 20\nlifetime = 5\nsize = 0.3\ndensity = 0.01\n'
+    )
+    scene = scene_of(tmp_path, text, "physical")
+    for name in ("urg", "lms"):
+        sensor = create_sensor(scene, name)
+        times = [1.0 + k * sensor.configured_period_s for k in range(4)]
+        batched = sensor.scans(times) if name == "urg" else sensor.scans(times, **lms200.configured_window(scene.sensor(name).options))
+        for time_s, scan in zip(times, batched):
+            np.testing.assert_array_equal(scan.values, sensor.configured_scan(time_s).values)
+        assert not np.array_equal(batched[0].values, batched[-1].values)  # it does move
+
+
+# --------------------------------------------------------------------------- ground truth
+
+
+def lrf(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "emulator.cli", *args], capture_output=True, text=True, cwd=cwd, timeout=120)
+
+
+def test_scan_json_gives_the_pose_at_its_time_stamp_and_each_beams_instant(tmp_path: Path) -> None:
+    write(tmp_path, ROBOT + "trajectory = { keyframes = [[0, 0, 0, 0], [2, 2, 0, 90]] }\n"
+          + RIDER.replace('body = "robot"\n', 'body = "robot"\nposition = [0.5, 0, 0.3]\n') + WALL)
+    result = lrf("scan", "x.toml", "--sensor", "urg", "--time", "1", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    out = json.loads(result.stdout)
+    # the body at (1, 0) turned 45°: the sensor 0.5 m ahead of it along 45°
+    half = math.sqrt(0.5) * 0.5
+    assert out["pose"]["position"] == pytest.approx([1 + half, half, 0.3])
+    assert out["pose"]["rotation_deg"] == pytest.approx([0, 0, 45])
+    assert out["pose"]["quaternion"] == pytest.approx([0, 0, math.sin(math.radians(22.5)), math.cos(math.radians(22.5))])
+    assert out["times_s"][768] == 1.0 and out["times_s"][0] == pytest.approx(1 - 0.075, abs=1e-9)
+
+
+def test_record_writes_the_ground_truth_beside_the_log(tmp_path: Path) -> None:
+    write(tmp_path, ROBOT + "trajectory = { keyframes = [[0, 0, 0, 0], [2, 2, 0, 90]] }\n" + RIDER + WALL)
+    result = lrf("record", "x.toml", "--sensor", "urg", "--start", "0.5", "--end", "1.5", "--out", "run.log", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    rows = [line.split() for line in (tmp_path / "run.tum").read_text().splitlines() if not line.startswith("#")]
+    log_lines = [line for line in (tmp_path / "run.log").read_text().splitlines() if line and not line.startswith("#")]
+    assert len(rows) == 11 == len(log_lines)
+    truth = np.array(rows, dtype=float)
+    np.testing.assert_allclose(truth[:, 0], np.arange(5, 16) / 10)
+    np.testing.assert_allclose(truth[:, 1], truth[:, 0], atol=1e-9)  # x = t on this leg
+    yaw = np.degrees(2 * np.arctan2(truth[:, 6], truth[:, 7]))
+    np.testing.assert_allclose(yaw, 45 * truth[:, 0], atol=1e-6)
+    # the file reads back as a trajectory
+    text = ROBOT + 'trajectory = { file = "run.tum" }\n' + RIDER
+    frames = World(load_scene(write(tmp_path, text, "y.toml"))).bodies.frames("robot", np.array([1.0]))
+    assert frames.positions[0] == pytest.approx([1.0, 0.0, 0.0])
