@@ -197,7 +197,7 @@ def test_replay_refuses_a_log_of_the_other_model(tmp_path: Path) -> None:
     ("args", "message"),
     [
         (["--model", "lms200"], "the log was recorded from a urg-04lx, not a lms200"),
-        (["--model", "urg-04lx", "--endpoint", "bogus:x"], "endpoint 'bogus:x': expected pty:PATH or tcp:HOST:PORT"),
+        (["--model", "urg-04lx", "--endpoint", "bogus:x"], "endpoint 'bogus:x': expected pty:PATH, tcp:HOST:PORT or rfc2217:HOST:PORT with PORT 0..65535"),
     ],
 )
 def test_replay_errors_are_one_line(tmp_path: Path, args: list[str], message: str) -> None:
