@@ -24,6 +24,7 @@ R = Rz(yaw) · Ry(pitch) · Rx(roll), as `Pose.rotation_matrix`.
 
 from __future__ import annotations
 
+import functools
 import threading
 from dataclasses import dataclass, field
 from typing import Union
@@ -55,17 +56,24 @@ def euler_quaternion(rotation_deg: np.ndarray) -> np.ndarray:
     )
 
 
-def quaternion_matrix(quaternions: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) of unit quaternions (..., 4)."""
-    x, y, z, w = np.moveaxis(np.asarray(quaternions, dtype=float), -1, 0)
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], axis=-1),
-            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], axis=-1),
-            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], axis=-1),
-        ],
-        axis=-2,
+_PRODUCT_TO_MATRIX = np.zeros((16, 9))  # row-major 3x3 from the products q_i q_j (x, y, z, w) of a unit quaternion
+for _row, _terms in enumerate(
+    (
+        ((1, 1, -2), (2, 2, -2)), ((0, 1, 2), (2, 3, -2)), ((0, 2, 2), (1, 3, 2)),
+        ((0, 1, 2), (2, 3, 2)), ((0, 0, -2), (2, 2, -2)), ((1, 2, 2), (0, 3, -2)),
+        ((0, 2, 2), (1, 3, -2)), ((1, 2, 2), (0, 3, 2)), ((0, 0, -2), (1, 1, -2)),
     )
+):
+    for _i, _j, _weight in _terms:
+        _PRODUCT_TO_MATRIX[4 * _i + _j, _row] += _weight
+_IDENTITY_ROWS = np.eye(3).reshape(9)
+
+
+def quaternion_matrix(quaternions: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of unit quaternions (..., 4), in one matrix product over all of them."""
+    q = np.asarray(quaternions, dtype=float)
+    products = (q[..., :, None] * q[..., None, :]).reshape(*q.shape[:-1], 16)
+    return (products @ _PRODUCT_TO_MATRIX + _IDENTITY_ROWS).reshape(*q.shape[:-1], 3, 3)
 
 
 def matrix_quaternion(rotation: np.ndarray) -> np.ndarray:
@@ -126,6 +134,12 @@ class Keyframes:
     positions: np.ndarray
     quaternions: np.ndarray
 
+    @functools.cached_property
+    def still_after(self) -> np.ndarray:
+        """(K,): whether the pose stays put from row k to row k + 1 (the last row: held for ever)."""
+        same = np.all(self.positions[1:] == self.positions[:-1], axis=1) & np.all(self.quaternions[1:] == self.quaternions[:-1], axis=1)
+        return np.append(same, True)
+
 
 @dataclass(frozen=True)
 class Live:
@@ -159,6 +173,9 @@ def keyframe_frames(keyframes: Keyframes, times_s: np.ndarray) -> Frames:
     """The keyframed pose at each of `times_s` (T,): linear position, slerped rotation, held outside."""
     times = np.asarray(times_s, dtype=float).reshape(-1)
     last = len(keyframes.times) - 1
+    still = _still_pose(keyframes, times)
+    if still is not None:  # e.g. a door between its movements: one pose for every instant
+        return Frames(np.broadcast_to(keyframes.positions[still], (len(times), 3)), np.broadcast_to(quaternion_matrix(keyframes.quaternions[still]), (len(times), 3, 3)))
     after = np.searchsorted(keyframes.times, times, side="right") - 1  # the last row at or before t: a jump's later row
     start = np.clip(after, 0, last)
     end = np.minimum(start + 1, last)
@@ -170,6 +187,19 @@ def keyframe_frames(keyframes: Keyframes, times_s: np.ndarray) -> Frames:
     positions = p0 + fraction[:, None] * (p1 - p0)
     quaternions = slerp(keyframes.quaternions[start], keyframes.quaternions[end], fraction)
     return Frames(positions, quaternion_matrix(quaternions))
+
+
+def _still_pose(keyframes: Keyframes, times: np.ndarray) -> int | None:
+    """The row whose pose holds at every one of `times` when the body does not move among them, else None."""
+    if not len(times):
+        return None
+    first, last = np.searchsorted(keyframes.times, (times.min(), times.max()), side="right") - 1
+    if last < 0:  # every instant before the first row: its pose is held
+        return 0
+    first = max(int(first), 0)  # before the first row the pose is row 0's
+    if not keyframes.still_after[first:last].all():
+        return None
+    return first if keyframes.still_after[last] or times.max() == keyframes.times[last] else None
 
 
 @dataclass(frozen=True, eq=False)

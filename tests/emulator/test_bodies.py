@@ -311,3 +311,24 @@ def test_record_writes_the_ground_truth_beside_the_log(tmp_path: Path) -> None:
     text = ROBOT + 'trajectory = { file = "run.tum" }\n' + RIDER
     frames = World(load_scene(write(tmp_path, text, "y.toml"))).bodies.frames("robot", np.array([1.0]))
     assert frames.positions[0] == pytest.approx([1.0, 0.0, 0.0])
+
+
+def test_the_shortcut_for_a_body_at_rest_between_movements_gives_the_interpolated_poses() -> None:
+    """A scan's instants where the body stands still take one pose for all; everywhere else the
+    general path runs: both must agree at every window of instants, jumps and holds included."""
+    from emulator.scene.bodies import Keyframes, keyframe_frames
+
+    rows = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 30], [3, 0, 30], [3, 1, 60], [4, 1, 60], [5, 1, 60], [6, 2, 90]], dtype=float)
+    keyframes = Keyframes(
+        rows[:, 0], np.column_stack([rows[:, 1], np.zeros((len(rows), 2))]), euler_quaternion(np.column_stack([np.zeros((len(rows), 2)), rows[:, 2]]))
+    )
+    rng = np.random.default_rng(12)
+    for _ in range(400):
+        start = rng.uniform(-1.0, 7.0)
+        times = start + np.sort(rng.uniform(0.0, rng.choice([0.0, 0.05, 0.5, 2.0]), 50))
+        if rng.random() < 0.2:
+            times = np.full(5, float(rng.choice(rows[:, 0])))
+        fast = keyframe_frames(keyframes, times)
+        slow = [keyframe_frames(keyframes, np.array([t, t + 100.0])) for t in times]  # a span that never stands still
+        np.testing.assert_allclose(fast.positions, [frames.positions[0] for frames in slow], atol=1e-12)
+        np.testing.assert_allclose(fast.rotations, [frames.rotations[0] for frames in slow], atol=1e-12)

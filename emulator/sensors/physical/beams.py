@@ -402,13 +402,19 @@ def _moving_sub_ray_solids(beams: Beams, rows: np.ndarray, angles_rad: np.ndarra
     )
 
 
+_MATERIAL_TABLES: weakref.WeakKeyDictionary[World, tuple[object, np.ndarray]] = weakref.WeakKeyDictionary()
+
+
 def _material_arrays(beams: Beams, objects: np.ndarray, params: PhysicalParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per sub-ray: angle exponent, range stretch and patchiness of the material hit."""
-    materials = [optics_for(obj.material) for obj in beams.scene.objects]
-    if not params.material_effects or not materials:
+    if not params.material_effects or not beams.scene.objects:
         return np.ones(objects.shape), np.zeros(objects.shape), np.zeros(objects.shape)
-    table = np.array([[m.angle_exponent, m.range_stretch, m.patchiness] for m in materials] + [[1.0, 0.0, 0.0]])
-    picked = table[np.where(objects >= 0, objects, len(materials))]
+    scene, table = _MATERIAL_TABLES.get(beams.world, (None, None))
+    if scene is not beams.scene or table is None:  # per object, plus a last row for "nothing hit"; kept (moving beams ask every scan)
+        materials = [optics_for(obj.material) for obj in beams.scene.objects]
+        table = np.array([[m.angle_exponent, m.range_stretch, m.patchiness] for m in materials] + [[1.0, 0.0, 0.0]])
+        _MATERIAL_TABLES[beams.world] = (beams.scene, table)
+    picked = table[np.where(objects >= 0, objects, len(table) - 1)]
     return picked[..., 0], picked[..., 1], picked[..., 2]
 
 
