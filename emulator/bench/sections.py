@@ -177,6 +177,12 @@ def lms_rates_section(quick: bool) -> Section:
     return bench_section(quick)
 
 
+def serve_section(quick: bool) -> Section:
+    from emulator.bench.serve_load import bench_section  # starts daemons: imported only when run
+
+    return bench_section(quick)
+
+
 def memory_section(quick: bool) -> Section:
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
     return {"peak_rss_mb": peak_mb}, [f"memory: peak RSS {peak_mb:.1f} MB (this process)"]
@@ -187,5 +193,6 @@ SECTIONS: dict[str, Callable[[bool], Section]] = {
     "scans": scans_section,
     "transport": transport_section,
     "lms-rates": lms_rates_section,
+    "serve": serve_section,
     "memory": memory_section,
 }

@@ -1,0 +1,206 @@
+"""A real `serve` streaming N URG-04LX to N real clients: CPU per scan, rate, jitter.
+
+The scene is railway's world (its geometry, smoke and plume) with its sensors
+replaced by N URG-04LX side by side, each on `tcp:127.0.0.1:0`. One client per
+sensor connects over TCP and asks for an unlimited MD stream; a single
+selector thread in this process reads all N sockets and notes when each scan
+message ends. Over the measuring window:
+
+- rate: scans received / scans due (10 per second per sensor);
+- jitter: |Δt − 100 ms| between consecutive scans of one sensor, p50 and p99
+  over all sensors' periods;
+- lateness: each scan's arrival against its slot (the scan's own timestamp,
+  with the sensor's least-delayed scan defining the offset); "on time" is
+  within ON_TIME_MS of the slot;
+- CPU per scan: user + system time of the daemon and its worker processes
+  from /proc/PID/stat (the process's own accounting), divided by the scans
+  received.
+
+Every figure is from one run (no best-of-N); the machine's load average is
+reported beside it, as the clients share the machine with the daemon.
+"""
+
+from __future__ import annotations
+
+import os
+import selectors
+import socket
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from emulator.bench.serve_process import ServeProcess
+from emulator.scene import bundled_scenes
+
+MD_UNLIMITED = b"MD0044072501000\n"
+SCAN_PERIOD_S = 0.1
+ON_TIME_MS = 10.0
+WARM_UP_S = 3.0
+CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
+
+
+def fleet_scene_text(count: int) -> str:
+    """railway's world with `count` URG-04LX (urg00, urg01, ...) side by side, each on a free TCP port."""
+    railway = next(bundled for bundled in bundled_scenes() if bundled.name == "railway")
+    text = Path(railway.path).read_text()
+    world = text[: text.index("[[sensors]]")]
+    sensors = []
+    for index in range(count):
+        y = -0.6 + 1.2 * index / max(1, count - 1)
+        sensors.append(
+            f'[[sensors]]\nname = "urg{index:02d}"\nmodel = "urg-04lx"\n'
+            f'position = [0.25, {y:.4f}, 0.3]\nendpoints = ["tcp:127.0.0.1:0"]\n'
+        )
+    return world + "\n".join(sensors)
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU of process `pid` and of its live child processes (the scan workers)."""
+    total = 0.0
+    for process in [pid, *_children(pid)]:
+        try:
+            fields = Path(f"/proc/{process}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue  # a worker that exited meanwhile
+        total += (int(fields[11]) + int(fields[12])) / CLOCK_TICKS  # utime, stime (fields 14, 15)
+    return total
+
+
+def _children(pid: int) -> list[int]:
+    children = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            children += [int(child) for child in (task / "children").read_text().split()]
+        except OSError:
+            continue
+    return children
+
+
+@dataclass
+class _Stream:
+    """One client's MD stream: the arrival time and timestamp of each scan message."""
+
+    sock: socket.socket
+    buffer: bytes = b""
+    echoed: bool = False
+    arrivals: list[float] = field(default_factory=list)
+    stamps: list[int] = field(default_factory=list)
+
+    def feed(self, data: bytes, now: float) -> None:
+        self.buffer += data
+        while (end := self.buffer.find(b"\n\n")) >= 0:
+            message, self.buffer = self.buffer[:end], self.buffer[end + 2 :]
+            if not self.echoed:
+                self.echoed = True
+                continue
+            lines = message.split(b"\n")
+            stamp = 0
+            for char in lines[2][:-1]:
+                stamp = (stamp << 6) | (char - 0x30)
+            self.arrivals.append(now)
+            self.stamps.append(stamp)
+
+
+def measure_serve(count: int, duration_s: float, workers: int | None = None, model: str = "physical") -> dict:
+    """Start `serve` with `count` URGs under preset `model`, stream them all to `count` clients,
+    measure `duration_s`."""
+    with tempfile.TemporaryDirectory(prefix="lrf-bench-serve-") as folder:
+        scene = Path(folder) / f"urg-x{count}.toml"
+        scene.write_text(fleet_scene_text(count))
+        endpoints = [f"urg{index:02d}=tcp:127.0.0.1:0" for index in range(count)]
+        extra = ["--model", model, *(["--workers", str(workers)] if workers is not None else [])]
+        with ServeProcess(scene, endpoints, extra_args=extra, timeout_s=120.0) as daemon:
+            streams = _stream_all(daemon, count, duration_s)
+            load = os.getloadavg()
+    return {"model": model, **_figures(count, duration_s, workers, streams, load)}
+
+
+def _stream_all(daemon: ServeProcess, count: int, duration_s: float) -> tuple[list[_Stream], float]:
+    selector = selectors.DefaultSelector()
+    streams = []
+    for index in range(count):
+        sock = socket.create_connection(daemon.endpoint(f"urg{index:02d}").address, timeout=5)
+        sock.sendall(MD_UNLIMITED)
+        sock.setblocking(False)
+        streams.append(_Stream(sock))
+        selector.register(sock, selectors.EVENT_READ, streams[-1])
+    started = time.monotonic()
+    measure_from, measure_to = started + WARM_UP_S, started + WARM_UP_S + duration_s
+    cpu_before = None
+    try:
+        while (now := time.monotonic()) < measure_to:
+            if cpu_before is None and now >= measure_from:
+                cpu_before = cpu_seconds(daemon.pid)
+                for stream in streams:  # the window starts here: forget the warm-up
+                    stream.arrivals.clear()
+                    stream.stamps.clear()
+            for key, _ in selector.select(timeout=0.05):
+                data = key.fileobj.recv(65536)
+                if not data:
+                    raise RuntimeError("the daemon closed a stream")
+                key.data.feed(data, time.monotonic())
+        cpu = cpu_seconds(daemon.pid) - (cpu_before or 0.0)
+    finally:
+        for stream in streams:
+            selector.unregister(stream.sock)
+            stream.sock.close()
+        selector.close()
+    return streams, cpu
+
+
+def _figures(count: int, duration_s: float, workers: int | None, measured: tuple[list[_Stream], float], load: tuple) -> dict:
+    streams, cpu = measured
+    received = sum(len(stream.arrivals) for stream in streams)
+    due = count * duration_s / SCAN_PERIOD_S
+    periods, lateness = [], []
+    for stream in streams:
+        if len(stream.arrivals) < 2:
+            continue
+        arrivals, stamps = np.asarray(stream.arrivals), np.asarray(stream.stamps, dtype=float) / 1000.0
+        periods.append(np.diff(arrivals))
+        offset = arrivals - stamps
+        lateness.append((offset - offset.min()) * 1000.0)
+    jitter = np.abs(np.concatenate(periods) - SCAN_PERIOD_S) * 1000.0 if periods else np.array([np.nan])
+    late = np.concatenate(lateness) if lateness else np.array([np.nan])
+    return {
+        "sensors": count,
+        "workers": workers if workers is not None else "default",
+        "duration_s": duration_s,
+        "scans_received": received,
+        "rate": received / due,
+        "on_time": float(np.mean(late <= ON_TIME_MS)) * min(1.0, received / due),
+        "jitter_p50_ms": float(np.percentile(jitter, 50)),
+        "jitter_p99_ms": float(np.percentile(jitter, 99)),
+        "lateness_p99_ms": float(np.percentile(late, 99)),
+        "lateness_max_ms": float(np.max(late)),
+        "cpu_ms_per_scan": cpu / received * 1000.0 if received else float("nan"),
+        "cpu_cores": cpu / duration_s,
+        "load_average": [round(value, 2) for value in load],
+    }
+
+
+def table_lines(rows: list[dict]) -> list[str]:
+    lines = [
+        "serve: a real daemon streaming N URG-04LX (railway's world) to N TCP clients; one run each, no best-of;"
+        f" on time = within {ON_TIME_MS:g} ms of its slot; CPU = daemon + workers (/proc/PID/stat)",
+        f"  {'model':<11} {'N':>3} {'workers':>7} {'rate':>7} {'on time':>8} {'jitter p50':>10} {'p99 ms':>7}"
+        f" {'late p99':>8} {'max ms':>7} {'CPU ms/scan':>11} {'cores':>6}  load avg",
+    ]
+    for row in rows:
+        lines.append(
+            f"  {row['model']:<11} {row['sensors']:>3} {row['workers']!s:>7} {row['rate']:>7.1%} {row['on_time']:>8.2%}"
+            f" {row['jitter_p50_ms']:>10.2f} {row['jitter_p99_ms']:>7.2f} {row['lateness_p99_ms']:>8.2f}"
+            f" {row['lateness_max_ms']:>7.1f} {row['cpu_ms_per_scan']:>11.2f} {row['cpu_cores']:>6.2f}"
+            f"  {' '.join(f'{value:g}' for value in row['load_average'])}"
+        )
+    return lines
+
+
+def bench_section(quick: bool) -> tuple[dict, list[str]]:
+    """`lrf-emulator bench --section serve`: N = 1, 10, 40 under `physical` (quick: 5 s each, else 30 s)."""
+    duration = 5.0 if quick else 30.0
+    rows = [measure_serve(count, duration) for count in (1, 10, 40)]
+    return {"serve": rows}, table_lines(rows)

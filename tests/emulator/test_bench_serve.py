@@ -1,0 +1,33 @@
+"""`bench --section serve`: a real daemon streaming N URGs to N clients, measured from outside."""
+
+from __future__ import annotations
+
+import os
+
+from emulator.bench.serve_load import cpu_seconds, fleet_scene_text, measure_serve
+from emulator.scene import load_scene
+
+
+def test_the_generated_scene_has_n_urgs_on_free_tcp_ports(tmp_path) -> None:
+    path = tmp_path / "urgs.toml"
+    path.write_text(fleet_scene_text(3))
+    scene = load_scene(path)
+    assert [(spec.name, spec.model, spec.endpoints) for spec in scene.sensors] == [
+        (f"urg0{index}", "urg-04lx", ("tcp:127.0.0.1:0",)) for index in range(3)
+    ]
+    assert scene.plumes == load_scene("railway").plumes
+
+
+def test_cpu_is_read_from_the_process_accounting() -> None:
+    before = cpu_seconds(os.getpid())
+    sum(range(3_000_000))
+    assert cpu_seconds(os.getpid()) > before
+
+
+def test_two_urgs_streamed_to_two_clients_are_counted_and_timed() -> None:
+    row = measure_serve(2, 1.5, workers=1, model="formsma2011")
+    assert 25 <= row["scans_received"] <= 35  # 2 sensors × 10/s × 1.5 s
+    assert 0.8 <= row["rate"] <= 1.2
+    assert row["cpu_ms_per_scan"] > 0 and row["cpu_cores"] > 0
+    assert 0 <= row["jitter_p50_ms"] <= row["jitter_p99_ms"]
+    assert 0 <= row["on_time"] <= 1
