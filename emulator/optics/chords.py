@@ -62,23 +62,38 @@ def slab_intervals(
 def paired_cube_intervals(
     origins: np.ndarray, directions: np.ndarray, centers: np.ndarray, half_sizes: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Entry and exit of ray k (K, 3) through the axis-aligned cube k (centre (K, 3), half edge (K,)) → (K,).
+    """Entry and exit of ray k (K, 3) through the axis-aligned cube k (centre (K, 3), half edge (K,)) → (K,)."""
+    return paired_cube_intervals_by_axis(origins.T, directions.T, centers.T, half_sizes)
 
-    The slab test with few array operations (it runs on every candidate pair):
-    an axis the ray runs parallel to gives NaN or ±inf bounds, which the
-    NaN-ignoring reductions skip; such a ray misses when its origin lies
-    outside that axis's slab.
+
+def paired_cube_intervals_by_axis(
+    origins: np.ndarray, directions: np.ndarray, centers: np.ndarray, half_sizes: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """`paired_cube_intervals` of arrays laid out (3, K), one row per axis (→ (K,)).
+
+    The slab test with few array operations (it runs on every candidate pair),
+    an axis at a time on contiguous rows (a reduction across a (K, 3) array's
+    short rows costs several times more): an axis the ray runs parallel to
+    gives NaN or ±inf bounds, which fmax/fmin skip; such a ray misses when its
+    origin lies outside that axis's slab. The bounds are combined in the order
+    of the axes, so the result is the same whatever the layout.
     """
+    near = far = outside = None
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        inverse = 1.0 / directions
-        offset = centers - origins
-        middle = offset * inverse
-        spread = half_sizes[:, None] * np.abs(inverse)
-        near = np.fmax.reduce(middle - spread, axis=1)
-        far = np.fmin.reduce(middle + spread, axis=1)
-    parallel = ~np.isfinite(inverse)  # d is 0 or so small that 1/d overflows
-    if parallel.any():
-        outside = (parallel & (np.abs(offset) > half_sizes[:, None])).any(axis=1)
+        for axis in range(3):
+            inverse = np.divide(1.0, directions[axis])
+            offset = np.subtract(centers[axis], origins[axis])
+            middle = offset * inverse
+            spread = np.abs(inverse)
+            spread *= half_sizes
+            lower, upper = middle - spread, middle + spread
+            near = lower if near is None else np.fmax(near, lower, out=near)
+            far = upper if far is None else np.fmin(far, upper, out=far)
+            parallel = ~np.isfinite(inverse)  # d is 0 or so small that 1/d overflows
+            if parallel.any():
+                away = parallel & (np.abs(offset) > half_sizes)
+                outside = away if outside is None else outside | away
+    if outside is not None and outside.any():
         near = np.where(outside, np.inf, near)
     return _empty_where(near, far)
 

@@ -26,7 +26,7 @@ from embreex.rtcore_scene import EmbreeScene
 
 from emulator.errors import SceneError
 from emulator.optics.candidates import candidate_pairs
-from emulator.optics.chords import NO_HIT, paired_cube_intervals, shape_intervals
+from emulator.optics.chords import NO_HIT, paired_cube_intervals_by_axis, shape_intervals
 from emulator.optics.hits import BeamHits, PreparedBeams, RegionCrossing
 from emulator.optics.moving import MovingSolids, Solids, exact_hits, triangle_planes
 from emulator.scene.bodies import BodyPoses, mounted_matrix
@@ -207,8 +207,11 @@ class World:
         beam, particle = candidate_pairs(
             origins, directions, beam_end, particles.centers, particles.half_sizes * np.sqrt(3.0)
         )
-        entry, exit_ = paired_cube_intervals(
-            origins[beam], directions[beam], particles.centers[particle], particles.half_sizes[particle]
+        entry, exit_ = paired_cube_intervals_by_axis(
+            np.ascontiguousarray(origins.T).take(beam, axis=1),
+            np.ascontiguousarray(directions.T).take(beam, axis=1),
+            np.ascontiguousarray(particles.centers.T).take(particle, axis=1),
+            particles.half_sizes.take(particle),
         )
         entry = np.maximum(entry, 0.0)
         met = (exit_ >= entry) & (entry < beam_end[beam])
