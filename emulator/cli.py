@@ -1,13 +1,32 @@
-"""The `lrf-emulator` command (CLI.md). Each subcommand lives in `emulator/commands/`."""
+"""lrf-emulator: virtual Hokuyo URG-04LX and Sick LMS200 laser range finders in a smoky 3D scene.
+
+Each subcommand lives in `emulator/commands/`; `lrf-emulator COMMAND --help` describes it.
+"""
 
 from __future__ import annotations
 
-import argparse
-import importlib
+import os
 import sys
-import traceback
 
-from emulator.errors import UserError
+from emulator.commands.stopping import Interrupted, hold_stop_signals, raise_on_stop_signals
+
+if __name__ == "__main__" or os.path.basename(sys.argv[0]) == "lrf-emulator":
+    hold_stop_signals()  # first: a ^C while the rest is imported must not print a traceback
+
+import argparse  # noqa: E402
+import importlib  # noqa: E402
+import signal  # noqa: E402
+import traceback  # noqa: E402
+
+from emulator.errors import UserError  # noqa: E402
+
+def package_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("lrf-emulator")
+    except PackageNotFoundError:
+        return "unknown"
 
 # subcommand → (module in emulator.commands, one-line help)
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
@@ -30,30 +49,37 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="lrf-emulator", description=__doc__)
+    parser = _Parser(prog="lrf-emulator", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"%(prog)s {package_version()}")
     parser.add_argument("--debug", action="store_true", help="show tracebacks for errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
     for name, (module_name, help_text) in SUBCOMMANDS.items():
         module = importlib.import_module(f"emulator.commands.{module_name}")
         command_parser = sub.add_parser(name, help=help_text, description=help_text)
+        # after the subcommand too; SUPPRESS keeps a --debug given before it
+        command_parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                                    help="show tracebacks for errors")
         module.add_arguments(command_parser)
         command_parser.set_defaults(_run=module.run)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    args = None
     try:
+        raise_on_stop_signals()
+        args = build_parser().parse_args(argv)
         return int(args._run(args) or 0)
     except UserError as error:
         if args.debug:
             traceback.print_exc()
         sys.stderr.write(f"lrf-emulator {args.command}: {error}\n")
         return 2
+    except Interrupted as interrupted:
+        return 128 + interrupted.signum
     except KeyboardInterrupt:
-        return 130
+        return 128 + signal.SIGINT
     except BrokenPipeError:
         return 0
 

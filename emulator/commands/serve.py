@@ -1,7 +1,8 @@
 """`lrf-emulator serve`: the daemon (CLI.md).
 
 Prints `ready SENSOR MODEL URI[ -> /dev/pts/N]` as each endpoint serves.
-SIGINT / SIGTERM stop it (symlinks removed, exit 0); SIGUSR1 prints one
+SIGINT / SIGTERM / SIGHUP / SIGQUIT stop it (symlinks removed, exit 0; during
+start-up: exit 128 + the signal's number, no traceback); SIGUSR1 prints one
 `stats` line on stderr (clients, fds, asyncio tasks) for operators and tests.
 """
 
@@ -14,6 +15,8 @@ import signal
 import sys
 
 from emulator.commands.options import add_scene_options, scene_from_args
+from emulator.commands import stopping
+from emulator.commands.stopping import STOP_SIGNALS
 from emulator.daemon.clock import WallClock
 from emulator.daemon.service import Daemon, Ready
 from emulator.errors import UserError
@@ -96,7 +99,7 @@ def served_sensors(scene: Scene, listed: str | None) -> tuple[str, ...] | None:
 
 
 def serve_until_signalled(daemon: Daemon) -> None:
-    """Run the daemon until SIGINT/SIGTERM, announcing each ready endpoint on stdout."""
+    """Run the daemon until a stop signal (SIGINT, SIGTERM, SIGHUP, SIGQUIT), announcing each ready endpoint on stdout."""
     # While the scan thread computes, the loop thread must get the GIL back within
     # a fraction of a millisecond to answer commands (the default is 5 ms).
     sys.setswitchinterval(SWITCH_INTERVAL_S)
@@ -105,8 +108,10 @@ def serve_until_signalled(daemon: Daemon) -> None:
 
 async def _serve(daemon: Daemon) -> None:
     loop = asyncio.get_running_loop()
-    for signum in (signal.SIGINT, signal.SIGTERM):
+    for signum in STOP_SIGNALS:
         loop.add_signal_handler(signum, daemon.stop)
+    if stopping.caught():  # raised earlier, but swallowed by some library
+        daemon.stop()
     loop.add_signal_handler(signal.SIGUSR1, _print_stats, daemon)
     await daemon.run(_announce)
 

@@ -60,7 +60,7 @@ class PtyEndpoint(ClientSlot):
     def open(self, loop: asyncio.AbstractEventLoop) -> str:
         """Create the pty and its symlink; returns the slave's name (/dev/pts/N)."""
         self._loop = loop
-        self._remove_stale_link()
+        self._refuse_existing_path()
         master, slave = os.openpty()
         try:
             tty.setraw(slave)  # no echo, no CR/LF rewriting: raw bytes both ways
@@ -71,7 +71,7 @@ class PtyEndpoint(ClientSlot):
         self._master = master
         self._hangup_poller.register(master, select.POLLHUP)
         try:
-            os.symlink(self.slave_name, self.link_path)
+            os.symlink(self.slave_name, self.link_path)  # fails if PATH appeared meanwhile: never replaced
         except OSError as error:
             self.close()
             raise UserError(f"{self.address}: cannot create {self.link_path}: {error.strerror}") from None
@@ -97,11 +97,16 @@ class PtyEndpoint(ClientSlot):
         speed = termios.tcgetattr(self._master)[5]
         return BAUD_OF_SPEED.get(speed)
 
-    def _remove_stale_link(self) -> None:
+    def _refuse_existing_path(self) -> None:
+        """Never replace what is at PATH: it may be another daemon's live link or a user's
+        file, and a link left by a killed daemon cannot be told apart from a live one."""
         if os.path.islink(self.link_path):
-            os.unlink(self.link_path)
-        elif self.link_path.exists():
-            raise UserError(f"{self.address}: {self.link_path} exists and is not a symlink")
+            raise UserError(
+                f"{self.address}: {self.link_path} already exists (a symlink to {os.readlink(self.link_path)}); "
+                "another daemon may be serving it: remove it if not"
+            )
+        if os.path.lexists(self.link_path):
+            raise UserError(f"{self.address}: {self.link_path} already exists and is not ours to replace")
 
     def _client_present(self) -> bool:
         return not any(event & select.POLLHUP for _, event in self._hangup_poller.poll(0))

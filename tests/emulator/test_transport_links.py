@@ -338,9 +338,8 @@ def test_pty_client_leaving_resets_the_session_once_and_the_next_starts_clean(
     assert device.lost == 2
 
 
-def test_pty_symlink_replaces_a_stale_one_and_is_removed_on_close(loop_thread: LoopThread, tmp_path: Path) -> None:
+def test_pty_symlink_is_created_and_removed_on_close(loop_thread: LoopThread, tmp_path: Path) -> None:
     link = tmp_path / "tty0"
-    link.symlink_to("/dev/pts/does-not-exist")
     served = serve(loop_thread, LineDevice(), "pty", tmp_path)
     slave = os.readlink(link)
     assert slave == served.endpoint.slave_name and slave.startswith("/dev/pts/")
@@ -348,12 +347,25 @@ def test_pty_symlink_replaces_a_stale_one_and_is_removed_on_close(loop_thread: L
     assert not os.path.lexists(link)
 
 
-def test_pty_path_that_is_not_a_symlink_is_a_user_error_and_is_kept(loop_thread: LoopThread, tmp_path: Path) -> None:
-    precious = tmp_path / "tty0"
-    precious.write_text("not a device")
-    with pytest.raises(UserError, match="exists and is not a symlink"):
+@pytest.mark.parametrize("existing", ["dangling link", "link to a file", "file"])
+def test_anything_already_at_the_pty_path_is_a_user_error_and_is_kept(
+    loop_thread: LoopThread, tmp_path: Path, existing: str
+) -> None:
+    """A link left by a killed daemon cannot be told from a live daemon's: nothing is replaced."""
+    path = tmp_path / "tty0"
+    target = tmp_path / "precious"
+    target.write_text("not a device")
+    if existing == "dangling link":
+        path.symlink_to("/dev/pts/does-not-exist")
+    elif existing == "link to a file":
+        path.symlink_to(target)
+    else:
+        path.write_text("not a device")
+    with pytest.raises(UserError, match="already exists"):
         serve(loop_thread, LineDevice(), "pty", tmp_path)
-    assert precious.read_text() == "not a device"
+    assert os.path.lexists(path) and target.read_text() == "not a device"
+    if path.is_symlink():
+        assert os.readlink(path) in ("/dev/pts/does-not-exist", str(target))
 
 
 def test_tcp_second_connection_is_refused_while_the_first_is_served(loop_thread: LoopThread, tmp_path: Path) -> None:

@@ -1,0 +1,93 @@
+"""Signals at any moment and whatever lies at a pty path: the daemon never harms files it did not make."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from emulator.bench.hostile import open_raw
+from emulator.bench.serve_process import ServeProcess, serve_command
+
+
+def serve_args(tmp_path: Path, *extra: str) -> list[str]:
+    return [*serve_command(), "serve", "railway", "--endpoint", f"urg=pty:{tmp_path / 'ttyURG0'}",
+            "--endpoint", f"lms=pty:{tmp_path / 'ttyLMS0'}", *extra]
+
+
+@pytest.mark.parametrize("signum", [signal.SIGHUP, signal.SIGQUIT, signal.SIGTERM, signal.SIGINT])
+def test_every_stop_signal_removes_the_symlinks_and_exits_0(tmp_path: Path, signum: int) -> None:
+    daemon = ServeProcess("railway", [f"urg=pty:{tmp_path / 'ttyURG0'}", f"lms=pty:{tmp_path / 'ttyLMS0'}"])
+    daemon.process.send_signal(signum)
+    assert daemon.process.wait(10) == 0
+    daemon.stop()
+    assert not os.path.lexists(tmp_path / "ttyURG0") and not os.path.lexists(tmp_path / "ttyLMS0")
+    assert "Traceback" not in daemon.stderr
+
+
+@pytest.mark.parametrize("delay_s", [0.1, 0.4, 0.8, 1.2])
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_stop_signal_during_start_up_exits_quietly_and_leaves_nothing(
+    tmp_path: Path, delay_s: float, signum: int
+) -> None:
+    process = subprocess.Popen(serve_args(tmp_path), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    time.sleep(delay_s)
+    process.send_signal(signum)
+    try:
+        _, stderr = process.communicate(timeout=15)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.communicate()
+        pytest.fail(f"serve kept running after {signal.Signals(signum).name} at {delay_s} s")
+    assert "Traceback" not in stderr and stderr.strip() == "", stderr
+    assert process.returncode in (0, 128 + signum)
+    assert not os.path.lexists(tmp_path / "ttyURG0") and not os.path.lexists(tmp_path / "ttyLMS0")
+
+
+@pytest.mark.parametrize("kind", ["link to a file", "dangling link", "file"])
+def test_serve_refuses_a_pty_path_that_exists_and_leaves_it_alone(tmp_path: Path, kind: str) -> None:
+    precious = tmp_path / "hostname"
+    precious.write_text("precious\n")
+    path = tmp_path / "ttyURG0"
+    if kind == "link to a file":
+        path.symlink_to(precious)
+    elif kind == "dangling link":
+        path.symlink_to("/dev/pts/999999")
+    else:
+        path.write_text("mine\n")
+    result = subprocess.run(serve_args(tmp_path), stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    assert len(result.stderr.strip().splitlines()) == 1 and "ttyURG0" in result.stderr, result.stderr
+    assert "already exists" in result.stderr
+    assert os.path.lexists(path) and precious.read_text() == "precious\n"
+    if kind == "file":
+        assert path.read_text() == "mine\n"
+    else:
+        assert os.readlink(path) in (str(precious), "/dev/pts/999999")
+    assert not os.path.lexists(tmp_path / "ttyLMS0")
+
+
+def test_a_second_daemon_on_the_same_path_is_refused_and_the_first_keeps_serving(tmp_path: Path) -> None:
+    with ServeProcess("railway", [f"urg=pty:{tmp_path / 'ttyURG0'}", f"lms=pty:{tmp_path / 'ttyLMS0'}"]) as first:
+        link = os.readlink(tmp_path / "ttyURG0")
+        second = subprocess.run(serve_args(tmp_path), stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                                timeout=60)
+        assert second.returncode == 2 and "already exists" in second.stderr, second.stderr
+        assert os.readlink(tmp_path / "ttyURG0") == link
+        client = open_raw(first.endpoint("urg", "pty").uri)
+        try:
+            client.send(b"VV\n")
+            reply = b""
+            for _ in range(20):
+                reply += client.drain(0.1)
+                if reply.endswith(b"\n\n"):
+                    break
+            assert reply.startswith(b"VV\n00P\n")
+        finally:
+            client.close()
+    assert not os.path.lexists(tmp_path / "ttyURG0")
