@@ -48,7 +48,7 @@ from protocols.scip import UrgDevice
 
 # the SensorSpec options each protocol device takes (SCENE_FORMAT.md)
 DEVICE_OPTIONS: dict[str, tuple[str, ...]] = {
-    "urg-04lx": ("serial", "boot_protocol"),
+    "urg-04lx": ("serial", "boot_protocol", "timing"),
     "lms200": ("baud", "type_string", "angle_deg", "resolution_deg", "units", "firmware_profile"),
 }
 

@@ -74,7 +74,7 @@ PLUME_KEYS = (
 MATERIAL_KEYS = tuple(field.name for field in dataclasses.fields(Material))
 
 # Model options with the real device's defaults (SCENE_FORMAT.md; firmware_profile is ours).
-URG_OPTION_KEYS = ("boot_protocol", "serial")
+URG_OPTION_KEYS = ("boot_protocol", "serial", "timing")
 LMS_OPTION_KEYS = ("baud", "angle_deg", "resolution_deg", "units", "type_string", "firmware_profile")
 OPTION_KEYS = {"urg-04lx": URG_OPTION_KEYS, "lms200": LMS_OPTION_KEYS}
 SENSOR_KEYS = ("name", "model", "body", "position", "rotation_deg", "endpoints", *URG_OPTION_KEYS, *LMS_OPTION_KEYS)
@@ -549,6 +549,8 @@ def _urg_options(table: _Table) -> dict[str, Any]:
         "boot_protocol": table.string("boot_protocol", "scip2", ("scip2", "scip1")),
         # ';' separates the fields of the SCIP VV reply, so a serial must not contain one.
         "serial": table.ascii_text("serial", "H0706400", max_chars=URG_SERIAL_MAX_CHARS, forbidden=";"),
+        # "real": replies at the unit's 100 ms command cycle; "fast": at once, for quick CI.
+        "timing": table.string("timing", "real", ("real", "fast")),
     }
 
 

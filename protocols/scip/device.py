@@ -8,6 +8,7 @@ docs/scip.md.
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
@@ -42,6 +43,12 @@ DEFAULT_SPEED_CODE = 99  # CR99: back to the initial speed, like CR00
 MAX_TAG_CHARS = 16
 TAG_CHARS = frozenset(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789 ._+@")
 BOOT_PROTOCOLS = ("scip2", "scip1")
+TIMINGS = ("real", "fast")
+# The capture: a revolution's measurement starts ~6 ms after the cycle point at which
+# the unit answers commands, so a GD that arrives just after a reply still gets the
+# next revolution (back-to-back GDs: stamps 100 ms apart).
+MEASUREMENT_START_S = 0.006
+_EPSILON_S = 1e-9
 
 # command → parameter characters before the optional ;tag
 PARAMETER_CHARS = {
@@ -79,12 +86,37 @@ class _Stream:
     remaining: int | None  # None while unlimited
 
 
+@dataclass(frozen=True)
+class _Command:
+    """A line waiting for the command cycle that handles it."""
+
+    due: float  # the cycle point (simulated s) at which it is handled
+    line: Line
+    received: float
+
+
+@dataclass(frozen=True)
+class _ScanReply:
+    """A GD/GS reply waiting for the revolution it reports to complete."""
+
+    due: float  # the scan's completion: k / 10 s
+    build: Callable[[], bytes]
+
+
 class UrgDevice:
-    """One client session with a virtual URG-04LX.
+    """One endpoint's virtual URG-04LX, across the clients that connect to it.
 
     `scan_source(t)` returns the scan completed at grid time t = k / 10 s.
     `now` is simulated seconds; the device timer reads
     (now - epoch) in ms mod 2^24, the epoch being `start_time` until RS.
+
+    `timing="real"` (default) answers as the real unit does: commands are handled
+    at the cycle point of each 100 ms revolution (k / 10 s), so a reply is due
+    0-100 ms after its command, and GD/GS report the first revolution measured
+    after the command. `timing="fast"` handles each command when it arrives and
+    answers GD/GS with the newest completed scan not already sent by a GD/GS
+    (waiting for the next one only when it was). Replies not yet due are held
+    by the device: `next_deadline()` says when to `poll`.
     """
 
     def __init__(
@@ -94,14 +126,21 @@ class UrgDevice:
         serial: str = DEFAULT_SERIAL,
         boot_protocol: str = "scip2",
         start_time: float = 0.0,
+        timing: str = "real",
     ) -> None:
         if boot_protocol not in BOOT_PROTOCOLS:
             raise ValueError(f"boot_protocol must be one of {BOOT_PROTOCOLS}, got {boot_protocol!r}")
+        if timing not in TIMINGS:
+            raise ValueError(f"timing must be one of {TIMINGS}, got {timing!r}")
         self._scan_source = scan_source
         self._serial = serial
         self._boot_protocol = boot_protocol
+        self._fast = timing == "fast"
         self._epoch_ms = _milliseconds(start_time)
         self._lines = LineSplitter()
+        self._queue: deque[_Command | _ScanReply] = deque()
+        self._handled_until = -math.inf  # replies leave in command order
+        self._last_polled_scan = -1  # the newest scan a GD/GS has reported
         self._power_on_settings()
 
     # --- protocols.device.Device -------------------------------------------
@@ -112,35 +151,47 @@ class UrgDevice:
         return None
 
     def receive(self, data: bytes, now: float) -> list[Output]:
-        """Scans due before `now` first, then one reply per complete line."""
-        outputs = self.poll(now)
+        """Queue each complete line for its command cycle; whatever is due by `now`."""
+        due = now if self._fast else _next_cycle_point(now)
         for line in self._lines.feed(data):
-            outputs.append(Output(self._reply(line, now)))
-        return outputs
+            self._queue.append(_Command(due, line, now))
+        return self.poll(now)
 
     def poll(self, now: float) -> list[Output]:
-        """Streamed MD/MS scans that have come due by `now`."""
-        stream = self._stream
-        if stream is None:
-            return []
-        latest = _latest_scan_index(now)
-        if stream.next_index > latest:
-            return []
-        period = stream.request.interval + 1
-        due = (latest - stream.next_index) // period + 1
-        self._skip(stream, max(due - MAX_BACKLOG_SCANS, 0))
+        """Streamed scans and replies that have come due by `now`, in time order.
+        With real timing a command handled at a cycle point goes before the scan
+        completed there, so a QT there ends the stream without one more scan after
+        its reply; a fast command goes after the scans already due when it arrives."""
         outputs = []
-        while self._stream is stream and stream.next_index <= latest:
-            outputs.append(Output(self._stream_message(stream), droppable=True))
-        return outputs
+        while self._queue and self._queue[0].due <= now + _EPSILON_S:
+            item = self._queue.popleft()
+            at = max(item.due, self._handled_until)
+            self._handled_until = at
+            outputs += self._stream_until(at, before=not self._fast)
+            if isinstance(item, _ScanReply):
+                outputs.append(Output(item.build()))
+                continue
+            reply = self._reply(item.line, at, item.received)
+            if isinstance(reply, _ScanReply):
+                self._queue.appendleft(reply)  # later commands wait behind it
+            else:
+                outputs.append(Output(reply))
+        return outputs + self._stream_until(now)
 
     def next_deadline(self) -> float | None:
-        return None if self._stream is None else self._stream.next_index / SCANS_PER_SECOND
+        deadlines = [self._queue[0].due] if self._queue else []
+        if self._stream is not None:
+            deadlines.append(self._stream.next_index / SCANS_PER_SECOND)
+        return min(deadlines, default=None)
 
     def connection_lost(self) -> None:
-        """The next client finds a freshly booted device; only the timer runs on."""
+        """Streaming stops and unanswered commands are forgotten; the unit keeps
+        its settings (SCIP mode, laser, speed, bit rate, timer) as a real one does
+        while powered: closing a port does not reboot it."""
         self._lines.reset()
-        self._power_on_settings()
+        self._queue.clear()
+        self._stream = None
+        self._adjust_mode = False
 
     # --- state read by the daemon ---------------------------------------------
 
@@ -164,6 +215,22 @@ class UrgDevice:
         self._bit_rate = DEFAULT_BIT_RATE
         self._high_sensitivity = False
 
+    def _stream_until(self, now: float, *, before: bool = False) -> list[Output]:
+        """Streamed MD/MS scans that have come due by `now` (`before`: strictly before)."""
+        stream = self._stream
+        if stream is None:
+            return []
+        latest = _latest_scan_index(now) - (before and _on_grid(now))
+        if stream.next_index > latest:
+            return []
+        period = stream.request.interval + 1
+        due = (latest - stream.next_index) // period + 1
+        self._skip(stream, max(due - MAX_BACKLOG_SCANS, 0))
+        outputs = []
+        while self._stream is stream and stream.next_index <= latest:
+            outputs.append(Output(self._stream_message(stream), droppable=True))
+        return outputs
+
     def _timer_ms(self, now: float) -> int:
         return (_milliseconds(now) - self._epoch_ms) % TIMER_MODULUS
 
@@ -173,7 +240,7 @@ class UrgDevice:
 
     # --- dispatch ---------------------------------------------------------------
 
-    def _reply(self, line: Line, now: float) -> bytes:
+    def _reply(self, line: Line, now: float, received: float) -> bytes | _ScanReply:
         if self._protocol == "scip1":
             return self._scip1_reply(line, now)
         if line.overlong:
@@ -194,9 +261,11 @@ class UrgDevice:
             return _reply(line.text, b"0C")
         if len(params) > expected:
             return _reply(line.text, b"0D")
-        return self._execute(code, params, line.text, b";" + tag if has_tag else b"", now)
+        return self._execute(code, params, line.text, b";" + tag if has_tag else b"", now, received)
 
-    def _execute(self, code: bytes, params: bytes, echo: bytes, tag_suffix: bytes, now: float) -> bytes:
+    def _execute(
+        self, code: bytes, params: bytes, echo: bytes, tag_suffix: bytes, now: float, received: float
+    ) -> bytes | _ScanReply:
         if code == b"VV":
             return _reply(echo, b"00", version_body(self._serial))
         if code == b"PP":
@@ -226,7 +295,7 @@ class UrgDevice:
         if code == b"HS":
             return _reply(echo, self._set_sensitivity(params))
         if code in (b"GD", b"GS"):
-            return self._latest_scan(code, params, echo, now)
+            return self._fresh_scan(code, params, echo, now, received)
         return self._start_stream(code, params, echo, tag_suffix, now)
 
     # --- commands ---------------------------------------------------------------
@@ -280,14 +349,30 @@ class UrgDevice:
         self._high_sensitivity = high
         return b"00"
 
-    def _latest_scan(self, code: bytes, params: bytes, echo: bytes, now: float) -> bytes:
+    def _fresh_scan(
+        self, code: bytes, params: bytes, echo: bytes, now: float, received: float
+    ) -> bytes | _ScanReply:
+        """GD/GS: a scan no GD/GS has reported and measured after the last RS; with
+        real timing, the first revolution whose measurement starts after the command."""
         request = parse_scan_request(params, streaming=False)
         if isinstance(request, bytes):
             return _reply(echo, request)
         if not self._laser_on:
             return _reply(echo, b"10")
-        scan = self._scan_at(_latest_scan_index(now))
-        return _reply(echo, b"00", self._scan_body(scan, request, VALUE_CHARS[code]))
+        if self._fast:
+            index = _latest_scan_index(now)
+        else:
+            index = math.ceil((received - MEASUREMENT_START_S) * SCANS_PER_SECOND - _EPSILON_S) + 1
+        first_after_reset = self._epoch_ms // (1000 // SCANS_PER_SECOND) + 1
+        index = max(index, self._last_polled_scan + 1, first_after_reset)
+        self._last_polled_scan = index
+        width = VALUE_CHARS[code]
+
+        def build() -> bytes:
+            return _reply(echo, b"00", self._scan_body(self._scan_at(index), request, width))
+
+        due = index / SCANS_PER_SECOND
+        return build() if due <= now + _EPSILON_S else _ScanReply(due, build)
 
     def _start_stream(self, code: bytes, params: bytes, echo: bytes, tag_suffix: bytes, now: float) -> bytes:
         request = parse_scan_request(params, streaming=True)
@@ -363,6 +448,17 @@ def _milliseconds(seconds: float) -> int:
 def _latest_scan_index(now: float) -> int:
     """Index k of the last scan completed at `now` (k / 10 <= now)."""
     return math.floor(now * SCANS_PER_SECOND + 1e-9)
+
+
+def _on_grid(now: float) -> bool:
+    """Whether `now` is a scan completion k / 10 s."""
+    return abs(now * SCANS_PER_SECOND - round(now * SCANS_PER_SECOND)) < 1e-6
+
+
+def _next_cycle_point(now: float) -> float:
+    """The first command cycle point at or after `now`: the unit handles commands
+    once per revolution, at the scan grid k / 10 s."""
+    return math.ceil(now * SCANS_PER_SECOND - _EPSILON_S) / SCANS_PER_SECOND
 
 
 def _first_scan_after(now: float) -> int:

@@ -90,6 +90,7 @@ position = [0.0, 0.0, 0.3]
 rotation_deg = [0, 0, 45]
 endpoints = ["pty:ttyURG0", "tcp:127.0.0.1:10940"]
 boot_protocol = "scip1"
+timing = "fast"
 serial = "H1234567"
 
 [[sensors]]
@@ -145,7 +146,7 @@ def test_every_key_lands_in_the_dataclasses(tmp_path: Path) -> None:
     assert scene.sensors == (
         SensorSpec(
             "front", "urg-04lx", Pose((0.0, 0.0, 0.3), (0.0, 0.0, 45.0)), ("pty:ttyURG0", "tcp:127.0.0.1:10940"),
-            {"boot_protocol": "scip1", "serial": "H1234567"},
+            {"boot_protocol": "scip1", "serial": "H1234567", "timing": "fast"},
         ),
         SensorSpec(
             "sick", "lms200", Pose((0.1, 0.0, 0.4)), ("pty:ttyLMS0", "tcp:[::1]:2111"),
@@ -185,7 +186,7 @@ model = "lms200"
     assert (plume.start, plume.stop) == (0.0, 1e9)
     urg, lms = scene.sensors
     assert urg.pose == Pose((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)) and urg.endpoints == ()
-    assert dict(urg.options) == {"boot_protocol": "scip2", "serial": "H0706400"}
+    assert dict(urg.options) == {"boot_protocol": "scip2", "serial": "H0706400", "timing": "real"}
     assert dict(lms.options) == {
         "baud": 9600, "angle_deg": 180, "resolution_deg": 0.5, "units": "mm",
         "type_string": "LMS200;301063;V02.10 ", "firmware_profile": "v2.30",

@@ -117,7 +117,7 @@ CASES = [
     ('[[sensors]]\nname = "front"', "sensors[0].model: missing required key"),
     ('[[sensors]]\nname = "front"\nmodel = "utm-30lx"', 'sensors[0].model: must be one of "urg-04lx", "lms200", got "utm-30lx"'),
     (URG + "range = 4", "sensors[0].range: unknown key (expected one of: name, model, body, position, rotation_deg, endpoints, "
-     "boot_protocol, serial, baud, angle_deg, resolution_deg, units, type_string, firmware_profile)"),
+     "boot_protocol, serial, timing, baud, angle_deg, resolution_deg, units, type_string, firmware_profile)"),
     (URG + URG, 'sensors[1].name: duplicate name "urg" (also sensors[0])'),
     (URG + 'endpoints = "pty:ttyURG0"', 'sensors[0].endpoints: expected a list of endpoints, got "pty:ttyURG0"'),
     (URG + "endpoints = [10940]", "sensors[0].endpoints[0]: expected a string, got 10940"),
@@ -151,6 +151,8 @@ CASES = [
     ],
     # urg-04lx options
     (URG + 'boot_protocol = "scip3"', 'sensors[0].boot_protocol: must be one of "scip2", "scip1", got "scip3"'),
+    (URG + 'timing = "slow"', 'sensors[0].timing: must be one of "real", "fast", got "slow"'),
+    (URG + "timing = 1", "sensors[0].timing: expected a string, got 1"),
     (URG + 'serial = "H0706400H0706400X"', 'sensors[0].serial: must be 1 to 16 characters, got 17: "H0706400H0706400X"'),
     (URG + 'serial = ""', 'sensors[0].serial: must be 1 to 16 characters, got 0: ""'),
     (URG + 'serial = "H07;06"', 'sensors[0].serial: must be printable ASCII without ";", got "H07;06"'),

@@ -151,8 +151,9 @@ def test_a_streaming_lms_at_9600_does_not_stall_the_urg(tmp_path: Path) -> None:
         streamed += lms.read(1920)  # what the line carries in the next 2 s
         elapsed = time.monotonic() - started
         lms.close()
-    # a stall behind the LMS line would be a whole telegram: 0.76 s at 9600
-    assert max(latencies) < 0.05, f"URG reply took {max(latencies) * 1000:.1f} ms while the LMS streamed"
+    # a stall behind the LMS line would be a whole telegram: 0.76 s at 9600; the URG
+    # itself answers at its next 100 ms command cycle (real timing), so allow that
+    assert max(latencies) < 0.15, f"URG reply took {max(latencies) * 1000:.1f} ms while the LMS streamed"
     assert b"\x02\x80" in streamed  # B0 telegrams from the LMS (STX, address 0x80)
     bytes_per_s = (len(streamed) + 1) / elapsed
     assert 0.85 * 960 <= bytes_per_s <= 1.1 * 960, f"LMS line carried {bytes_per_s:.0f} B/s at 9600"

@@ -19,7 +19,7 @@ def ramp_source(t: float) -> Scan:
 
 @pytest.fixture
 def device() -> UrgDevice:
-    return UrgDevice(ramp_source, boot_protocol="scip1", serial="H0706400")
+    return UrgDevice(ramp_source, timing="fast", boot_protocol="scip1", serial="H0706400")
 
 
 def send(device: UrgDevice, line: bytes, now: float = 1.0) -> bytes:
@@ -66,11 +66,12 @@ def test_switch_to_scip2_then_2_0_rules_apply(device):
     assert send(device, b"VV").startswith(b"VV\n00P\nVEND:")
 
 
-def test_connection_lost_boots_back_into_scip_1_1(device):
+def test_the_switch_to_scip_2_0_outlives_the_connection(device):
+    """urg_c, hokuyo-python-lib and BreezyLidar reopen the port and expect 2.0."""
     send(device, b"SCIP2.0")
     device.connection_lost()
-    assert send(device, b"VV") == b"VV\nE\n\n"
-    assert send(device, b"V").startswith(b"V\n0\nVEND:")
+    assert send(device, b"VV").startswith(b"VV\n00P\nVEND:")
+    assert send(device, b"V") == b"V\n0Ee\n\n"
 
 
 def test_overlong_line_gets_E_with_the_kept_part_echoed(device):

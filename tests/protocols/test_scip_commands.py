@@ -46,7 +46,7 @@ def info(reply: bytes, key: bytes) -> bytes:
 
 @pytest.fixture
 def device() -> UrgDevice:
-    return UrgDevice(ramp_source)
+    return UrgDevice(ramp_source, timing="fast")
 
 
 @pytest.mark.parametrize(
@@ -100,12 +100,12 @@ def test_gd_serves_the_latest_completed_scan_with_its_stamp(device):
 
 def test_gd_accepts_every_step_0_to_768(device):
     send(device, b"BM")
-    values, _ = scan_values(send(device, b"GD0000076800", now=0.0), 3)
-    assert values.tolist() == (100 + np.arange(STEPS)).tolist()
+    values, _ = scan_values(send(device, b"GD0000076800", now=1.0), 3)
+    assert values.tolist() == (110 + np.arange(STEPS)).tolist()
 
 
 def test_gs_sends_two_character_values_and_cluster_minima(device):
-    send(device, b"BM")
+    send(device, b"BM", now=0.5)
     reply = send(device, b"GS0100010903", now=0.5)
     assert reply.startswith(b"GS0100010903\n00P\n")
     values, _ = scan_values(reply, 2)
@@ -236,9 +236,9 @@ def test_rs_resets_laser_stream_settings_and_timer(device):
 
 @pytest.mark.parametrize("terminator", [b"\n", b"\r", b"\r\n"])
 def test_each_terminator_gives_the_same_reply_and_empty_lines_are_ignored(terminator):
-    device = UrgDevice(ramp_source)
+    device = UrgDevice(ramp_source, timing="fast")
     outputs = device.receive(b"\n\r\n" + b"VV" + terminator + terminator + b"BM" + terminator, now=0.0)
-    assert [o.data for o in outputs] == [send(UrgDevice(ramp_source), b"VV"), b"BM\n00P\n\n"]
+    assert [o.data for o in outputs] == [send(UrgDevice(ramp_source, timing="fast"), b"VV"), b"BM\n00P\n\n"]
 
 
 def test_overlong_line_is_refused_with_0B_and_the_next_line_still_works(device):
@@ -253,18 +253,28 @@ def test_a_line_split_across_receives_is_answered_once_complete(device):
     assert output.data.startswith(b"VV\n00P\nVEND:")
 
 
-def test_connection_lost_gives_the_next_client_a_clean_device(device):
-    send(device, b"MD0044072501000", now=1.0)
+def test_connection_lost_stops_the_stream_but_the_unit_keeps_its_settings(device):
+    """A real unit lives as long as its power, not its client's connection."""
     send(device, b"CR02")
-    send(device, b"TM0")
+    send(device, b"SS115200")
+    send(device, b"MD0044072501000", now=1.0)
     device.receive(b"GD00", now=1.0)  # half a line left behind
     device.connection_lost()
-    assert device.next_deadline() is None and not device.laser_on
-    assert send(device, b"BM", now=2.0) == b"BM\n00P\n\n"
-    assert info(send(device, b"II", now=2.0), b"TIME") == b"0007D0"  # the timer runs on
-    assert info(send(device, b"II", now=2.0), b"SCSP").startswith(b"Initial(")
+    assert device.next_deadline() is None and device.laser_on  # the stream stopped, the laser stays on
+    assert send(device, b"BM", now=2.0) == b"BM\n02R\n\n"  # as the capture's first BM
+    assert send(device, b"VV", now=2.0).startswith(b"VV\n00P\n")  # the half line is gone
+    status = send(device, b"II", now=2.0)
+    assert info(status, b"TIME") == b"0007D0"  # the timer runs on
+    assert info(status, b"SCSP").startswith(b"Changed(")
+    assert info(status, b"SBPS").startswith(b"115200")
+
+
+def test_connection_lost_leaves_time_adjust_mode(device):
+    send(device, b"TM0")
+    device.connection_lost()
+    assert status_of(send(device, b"BM", now=2.0)) == b"00"
 
 
 def test_unknown_boot_protocol_is_rejected():
     with pytest.raises(ValueError, match="boot_protocol"):
-        UrgDevice(ramp_source, boot_protocol="scip3")
+        UrgDevice(ramp_source, timing="fast", boot_protocol="scip3")

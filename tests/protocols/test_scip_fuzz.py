@@ -60,7 +60,7 @@ def well_formed_scip2(reply: bytes, echo: bytes) -> bool:
 @settings(max_examples=150, deadline=None)
 @given(stream=streams, cuts=st.lists(st.integers(0, 4000), max_size=12))
 def test_every_line_gets_one_well_formed_reply_whatever_the_chunking(stream, cuts):
-    device = UrgDevice(noisy_source)
+    device = UrgDevice(noisy_source, timing="fast")
     outputs = []
     for chunk in chunked(stream, cuts):
         outputs += device.receive(chunk, now=10.0)  # time stands still: no scan comes due
@@ -70,7 +70,7 @@ def test_every_line_gets_one_well_formed_reply_whatever_the_chunking(stream, cut
         assert not output.droppable
         assert well_formed_scip2(output.data, line), (line, output.data)
 
-    whole = UrgDevice(noisy_source).receive(stream, now=10.0)
+    whole = UrgDevice(noisy_source, timing="fast").receive(stream, now=10.0)
     assert [o.data for o in whole] == [o.data for o in outputs]
 
 
@@ -82,7 +82,7 @@ def well_formed_scip1(reply: bytes, echo: bytes) -> bool:
 @settings(max_examples=100, deadline=None)
 @given(stream=streams, cuts=st.lists(st.integers(0, 4000), max_size=12))
 def test_scip1_boot_answers_in_1_1_until_switched_then_in_2_0(stream, cuts):
-    device = UrgDevice(noisy_source, boot_protocol="scip1")
+    device = UrgDevice(noisy_source, timing="fast", boot_protocol="scip1")
     outputs = []
     for chunk in chunked(stream, cuts):
         outputs += device.receive(chunk, now=10.0)
@@ -98,14 +98,14 @@ def test_scip1_boot_answers_in_1_1_until_switched_then_in_2_0(stream, cuts):
         else:
             assert well_formed_scip1(output.data, line), (line, output.data)
 
-    whole = UrgDevice(noisy_source, boot_protocol="scip1").receive(stream, now=10.0)
+    whole = UrgDevice(noisy_source, timing="fast", boot_protocol="scip1").receive(stream, now=10.0)
     assert [o.data for o in whole] == [o.data for o in outputs]
 
 
 @settings(max_examples=100, deadline=None)
 @given(pieces=parts, step_ms=st.integers(1, 400))
 def test_streaming_while_time_advances_stays_well_formed(pieces, step_ms):
-    device = UrgDevice(noisy_source)
+    device = UrgDevice(noisy_source, timing="fast")
     replies, scans = [], []
     for position, piece in enumerate(pieces):
         for output in device.receive(piece, now=position * step_ms / 1000):

@@ -52,14 +52,14 @@ def test_capture_holds_the_expected_exchanges():
 
 @pytest.mark.parametrize("command", [b"VV\n", b"PP\n"])
 def test_identity_replies_are_byte_exact(command):
-    device = UrgDevice(fixed_scan_source(np.zeros(STEPS, dtype=int)))
+    device = UrgDevice(fixed_scan_source(np.zeros(STEPS, dtype=int)), timing="fast")
     [output] = device.receive(command, now=5.0)
     assert output.data == real_reply(command)
     assert not output.droppable
 
 
 def test_serial_number_appears_in_vv_with_its_checksum():
-    device = UrgDevice(fixed_scan_source(np.zeros(STEPS, dtype=int)), serial="H1234567")
+    device = UrgDevice(fixed_scan_source(np.zeros(STEPS, dtype=int)), timing="fast", serial="H1234567")
     [output] = device.receive(b"VV\n", now=0.0)
     assert b"SERI:H1234567;" + checksum(b"SERI:H1234567") + b"\n\n" in output.data
 
@@ -67,7 +67,7 @@ def test_serial_number_appears_in_vv_with_its_checksum():
 @pytest.mark.parametrize("occurrence,timer_ms", [(0, 0x6A5404), (1, 0x6A55F8)])
 def test_ii_reply_is_byte_exact_when_the_timer_reads_the_same(occurrence, timer_ms):
     start_time = 100.0
-    device = UrgDevice(fixed_scan_source(np.zeros(STEPS, dtype=int)), start_time=start_time)
+    device = UrgDevice(fixed_scan_source(np.zeros(STEPS, dtype=int)), timing="fast", start_time=start_time)
     device.receive(b"BM\n", now=start_time)
     [output] = device.receive(b"II\n", now=start_time + timer_ms / 1000)
     assert output.data == real_reply(b"II\n", occurrence)
@@ -75,7 +75,7 @@ def test_ii_reply_is_byte_exact_when_the_timer_reads_the_same(occurrence, timer_
 
 @pytest.mark.parametrize("timer_ms", [0, 1, 0x081615, 0x6A5404, 0xFFFFFF])
 def test_ii_time_line_is_live_upper_hex_with_checksum_of_the_text_before_the_semicolon(timer_ms):
-    device = UrgDevice(fixed_scan_source(np.zeros(STEPS, dtype=int)))
+    device = UrgDevice(fixed_scan_source(np.zeros(STEPS, dtype=int)), timing="fast")
     [output] = device.receive(b"II\n", now=timer_ms / 1000)
     lines = output.data.split(b"\n")
     assert len(lines) == 2 + 7 + 2  # echo, status, 7 info lines, empty line, trailing ''
@@ -86,7 +86,7 @@ def test_ii_time_line_is_live_upper_hex_with_checksum_of_the_text_before_the_sem
 
 
 def test_timer_wraps_at_24_bits():
-    device = UrgDevice(fixed_scan_source(np.zeros(STEPS, dtype=int)))
+    device = UrgDevice(fixed_scan_source(np.zeros(STEPS, dtype=int)), timing="fast")
     [output] = device.receive(b"II\n", now=(1 << 24) / 1000 + 0.005)
     assert b"TIME:000005;" in output.data
 
@@ -108,7 +108,7 @@ def test_gd_reply_is_rebuilt_byte_for_byte_from_its_decoded_values():
     values[44:726] = capture_values
     scan_time_s = 7000.0
     start_time = scan_time_s - stamp / 1000  # so the scan's stamp reads 0x6A55FE
-    device = UrgDevice(fixed_scan_source(values), start_time=start_time)
+    device = UrgDevice(fixed_scan_source(values), timing="fast", start_time=start_time)
     device.receive(b"BM\n", now=scan_time_s)
     [output] = device.receive(b"GD0044072501\n", now=scan_time_s + 0.05)
     assert len(output.data) == 2134
@@ -117,7 +117,7 @@ def test_gd_reply_is_rebuilt_byte_for_byte_from_its_decoded_values():
 
 @pytest.mark.parametrize("command", [b"BM\n", b"CR00\n"])
 def test_already_in_that_state_statuses_match_the_capture(command):
-    device = UrgDevice(fixed_scan_source(np.zeros(STEPS, dtype=int)))
+    device = UrgDevice(fixed_scan_source(np.zeros(STEPS, dtype=int)), timing="fast")
     device.receive(b"BM\n", now=0.0)  # the real unit's laser was already on
     [output] = device.receive(command, now=0.1)
     assert output.data == real_reply(command)

@@ -60,7 +60,7 @@ def test_md_streams_the_right_scans_counts_and_stops(
     end = min(start + span, 768)
     width = 3 if code == b"MD" else 2
     params = b"%04d%04d%02d%d%02d" % (start, end, cluster, interval, count)
-    device = UrgDevice(ramp_source)
+    device = UrgDevice(ramp_source, timing="fast")
     [ack] = device.receive(code + params + tag + b"\n", now=request_ms / 1000)
     assert ack.data == code + params + tag + b"\n00P\n\n"
     assert device.laser_on
@@ -90,7 +90,7 @@ def test_md_streams_the_right_scans_counts_and_stops(
 
 
 def test_qt_stops_the_stream_after_scans_already_due():
-    device = UrgDevice(ramp_source)
+    device = UrgDevice(ramp_source, timing="fast")
     device.receive(b"MD0044072501000\n", now=1.0)
     outputs = device.receive(b"QT\n", now=1.15)
     assert [o.droppable for o in outputs] == [True, False]
@@ -100,7 +100,7 @@ def test_qt_stops_the_stream_after_scans_already_due():
 
 
 def test_a_late_poll_sends_only_the_newest_scans_but_counts_all():
-    device = UrgDevice(ramp_source)
+    device = UrgDevice(ramp_source, timing="fast")
     device.receive(b"MD0044004501050\n", now=0.0)
     outputs = device.poll(3.0)  # 30 scans due, 50 requested
     assert len(outputs) == 10
@@ -111,7 +111,7 @@ def test_a_late_poll_sends_only_the_newest_scans_but_counts_all():
 
 
 def test_a_new_md_replaces_the_running_one():
-    device = UrgDevice(ramp_source)
+    device = UrgDevice(ramp_source, timing="fast")
     device.receive(b"MD0044072501000\n", now=0.0)
     device.receive(b"MS0100010102003\n", now=0.3)
     outputs = device.poll(0.5)
@@ -120,7 +120,7 @@ def test_a_new_md_replaces_the_running_one():
 
 
 def test_gd_while_streaming_is_answered_between_scans():
-    device = UrgDevice(ramp_source)
+    device = UrgDevice(ramp_source, timing="fast")
     device.receive(b"MD0044072501003\n", now=0.0)
     outputs = device.receive(b"GD0044072501\n", now=0.2)
     assert [o.data.split(b"\n", 2)[1] for o in outputs] == [b"99b", b"99b", b"00P"]
