@@ -106,7 +106,7 @@ class LmsReplay:
 
     def scan(
         self, time_s: float, *, start_deg: float = 0.0, step_deg: float = 0.5,
-        count: int = 361, unit: str = "mm",
+        count: int = 361, unit: str = "mm", field_bits: int = 13,
     ) -> Scan:
         wanted = np.radians(start_deg + step_deg * np.arange(count) - 90.0)
         nearest = np.clip(np.searchsorted(self._angles, wanted), 1, len(self._angles) - 1)
@@ -115,14 +115,19 @@ class LmsReplay:
         found = np.abs(self._angles[nearest] - wanted) <= ANGLE_TOLERANCE_RAD
         recorded = _convert_unit(self._values[self._clock.row_at(time_s)][nearest], self._unit, unit)
         values = np.where(found, recorded, LMS_NO_ECHO)
+        # a wider measuring-mode field keeps the distances; its codes sit at its top
+        values = np.where(values >= LMS_FIRST_CODE, values + (1 << field_bits) - (1 << 13), values)
         return Scan(self.name, self.model, time_s, wanted, values, unit)
 
     def scans(
         self, times_s: Sequence[float], *, start_deg: float = 0.0, step_deg: float = 0.5,
-        count: int = 361, unit: str = "mm",
+        count: int = 361, unit: str = "mm", field_bits: int = 13,
     ) -> list[Scan]:
         """`scan` of one window at each of `times_s` (a table look-up each: nothing to share)."""
-        return [self.scan(t, start_deg=start_deg, step_deg=step_deg, count=count, unit=unit) for t in times_s]
+        return [
+            self.scan(t, start_deg=start_deg, step_deg=step_deg, count=count, unit=unit, field_bits=field_bits)
+            for t in times_s
+        ]
 
 
 def _convert_unit(values: np.ndarray, from_unit: str, to_unit: str) -> np.ndarray:

@@ -278,6 +278,12 @@ class _Table:
         _check_bounds(raw, raw, self.place.key(key), **bounds)
         return raw
 
+    def boolean(self, key: str, default: Any = _MISSING) -> bool:
+        raw = self.raw(key, default)
+        if not isinstance(raw, bool):
+            raise self.place.key(key).error(f"expected true or false, got {_show(raw)}")
+        return raw
+
     def string(self, key: str, default: Any = _MISSING, choices: Sequence[str] | None = None) -> str:
         value = _as_string(self.raw(key, default), self.place.key(key))
         if choices is not None and value not in choices:
@@ -373,7 +379,9 @@ def _materials(tables: list[_Table]) -> Mapping[str, Material]:
         required = _MISSING if base is None else base.reflectivity
         values: dict[str, Any] = {"reflectivity": table.number("reflectivity", required, at_least=0, at_most=1)}
         for key in MATERIAL_KEYS:
-            if key not in ("name", "reflectivity") and key in table:
+            if key == "retroreflective" and key in table:
+                values[key] = table.boolean(key, False)
+            elif key not in ("name", "reflectivity", "retroreflective") and key in table:
                 values[key] = table.number(key)
         materials[name] = dataclasses.replace(base, **values) if base else Material(name, **values)
     return MappingProxyType(materials)

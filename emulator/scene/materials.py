@@ -13,6 +13,9 @@ and 905 nm (LMS200) wavelengths:
                       less diffuse light returns than from white paper
 - rusty_steel   0.25  the rusty steel plates beside the target in section 3.1
 - black_velvet  0.02  Pascoal et al.'s black velvet, a near-perfect absorber
+- retro_reflector 1.0 retro-reflective tape or a cat's-eye target (`retroreflective`):
+                      it sends the light back towards the scanner, so the LMS200
+                      sets its reflector bits (measuring modes 01, 03, 05) on it
 
 A scene's [[materials]] table adds materials or overrides these by name.
 """
@@ -35,6 +38,7 @@ BUILTIN_MATERIALS: Mapping[str, Material] = MappingProxyType(
             Material("gold_paper", reflectivity=0.6),
             Material("rusty_steel", reflectivity=0.25),
             Material("black_velvet", reflectivity=0.02),
+            Material("retro_reflector", reflectivity=1.0, retroreflective=True),
         )
     }
 )

@@ -84,6 +84,7 @@ class Material:
 
     name: str
     reflectivity: float = 0.8
+    retroreflective: bool = False  # returns light towards its source: the LMS200 flags it as a reflector
 
 
 @dataclass(frozen=True)

@@ -42,9 +42,10 @@ def urg_values(hits: BeamHits, beams: Beams) -> np.ndarray:
     return np.where(extinguished | in_plume, urg04lx.LOW_INTENSITY, values)
 
 
-def lms_values(hits: BeamHits, beams: Beams, unit: str) -> np.ndarray:
+def lms_values(hits: BeamHits, beams: Beams, unit: str, *, field_bits: int = 13) -> np.ndarray:
     seen_range = np.minimum(hits.solid_range_m, hits.plume_hit_range_m)
     echo = np.isfinite(seen_range)
     counts = np.rint(np.where(echo, seen_range, 0.0) * lms200.UNITS_PER_M[unit]).astype(np.int64)
-    values = np.where(counts >= lms200.ABOVE_MAXIMUM, lms200.ABOVE_MAXIMUM, counts)
-    return np.where(echo, values, lms200.NO_ECHO)
+    above_maximum = lms200.field_code(lms200.ABOVE_MAXIMUM, field_bits)
+    values = np.where(counts >= above_maximum, above_maximum, counts)
+    return np.where(echo, values, lms200.field_code(lms200.NO_ECHO, field_bits))

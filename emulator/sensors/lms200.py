@@ -27,6 +27,28 @@ UNITS_PER_M = {"mm": 1000.0, "cm": 100.0}
 REVOLUTIONS_PER_SCAN = {1.0: 1, 0.5: 2, 0.25: 4}  # interlaced: each revolution measures a 1° grid
 ABOVE_MAXIMUM = 8183
 NO_ECHO = 8191
+# A measuring mode's distance field: 13 bits (8 m in mm, 80 m in cm), 14 (16 m) or 15 (32 m);
+# its error codes are the 13-bit ones moved to the top of the field (TL Table 3-7: 1FF7h,
+# 3FF7h, 7FF7h = "value above maximum").
+FIELD_BITS = (13, 14, 15)
+# A value within this of the solid surface's range is that surface's echo (not smoke's):
+# a retro-reflective surface there makes it a reflector echo.
+REFLECTOR_MATCH_M = 0.1
+
+
+def field_code(code: int, field_bits: int) -> int:
+    """The 13-bit error code `code` (8183..8191) in a `field_bits` wide distance field."""
+    return code + (1 << field_bits) - (1 << 13)
+
+
+def reflector_echoes(scene: Scene, hits: BeamHits, values: np.ndarray, unit: str, field_bits: int) -> np.ndarray:
+    """Per beam: its value is a distance measured on a retro-reflective material (the
+    LMS200's reflector bits; the protocol only encodes them)."""
+    retro = np.array([scene.materials[obj.material].retroreflective for obj in scene.objects] + [False])
+    index = np.where((hits.object_index >= 0) & (hits.object_index < len(scene.objects)), hits.object_index, -1)
+    distance = values < field_code(ABOVE_MAXIMUM, field_bits)
+    at_surface = np.abs(values / UNITS_PER_M[unit] - hits.solid_range_m) <= REFLECTOR_MATCH_M
+    return retro[index] & distance & at_surface
 
 
 def device_angles_deg(start_deg: float, step_deg: float, count: int) -> np.ndarray:
@@ -117,10 +139,13 @@ class LmsSensor:
         return hits, beams
 
     def scan(
-        self, time_s: float, *, start_deg: float = 0.0, step_deg: float = 0.5, count: int = 361, unit: str = "mm"
+        self, time_s: float, *, start_deg: float = 0.0, step_deg: float = 0.5, count: int = 361, unit: str = "mm",
+        field_bits: int = 13,
     ) -> Scan:
         """Values at device angles start_deg + i·step_deg (i < count), in `unit`, at `time_s`."""
-        return self.scans((time_s,), start_deg=start_deg, step_deg=step_deg, count=count, unit=unit)[0]
+        return self.scans(
+            (time_s,), start_deg=start_deg, step_deg=step_deg, count=count, unit=unit, field_bits=field_bits
+        )[0]
 
     def scans(
         self,
@@ -130,16 +155,28 @@ class LmsSensor:
         step_deg: float = 0.5,
         count: int = 361,
         unit: str = "mm",
+        field_bits: int = 13,
     ) -> list[Scan]:
         """`scan` of one window at each of `times_s`, computed together: a preset that can
-        (`physical`) shares each pass among them, which costs far less per scan."""
+        (`physical`) shares each pass among them, which costs far less per scan. `field_bits`:
+        the measuring mode's distance field (codes at its top); each scan says which of its
+        values are reflector echoes."""
         if unit not in UNITS_PER_M:
             raise ValueError(f"unit must be one of {sorted(UNITS_PER_M)}, got {unit!r}")
+        if field_bits not in FIELD_BITS:
+            raise ValueError(f"field_bits must be one of {FIELD_BITS}, got {field_bits!r}")
         window = self._beams(start_deg, step_deg, count)
         instants = [simulated_instant(t) for t in times_s]
         hits, beams = zip(*(self._cast(window, t) for t in instants)) if instants else ((), ())
-        values = values_at_instants(self._response, "lms_values", hits, beams, unit).astype(np.int64, copy=False)
-        return [Scan(self.name, MODEL, t, window.angles_rad, row, unit, window.offsets_s) for t, row in zip(times_s, values)]
+        values = values_at_instants(self._response, "lms_values", hits, beams, unit, field_bits=field_bits)
+        values = values.astype(np.int64, copy=False)
+        return [
+            Scan(
+                self.name, MODEL, t, window.angles_rad, row, unit, window.offsets_s,
+                reflector_echoes(self.scene, hit, row, unit, field_bits),
+            )
+            for t, row, hit in zip(times_s, values, hits)
+        ]
 
     def configured_scan(self, time_s: float) -> Scan:
         """The scan the scene's options select (`configured_window`), at `time_s`."""

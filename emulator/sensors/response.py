@@ -3,7 +3,8 @@
 A preset is a module `emulator.sensors.<preset>` defining
 
     urg_values(hits: BeamHits, beams: Beams) -> np.ndarray   # int values per beam (mm or code < 20)
-    lms_values(hits: BeamHits, beams: Beams, unit: str) -> np.ndarray   # int values (unit or 8183..8191)
+    lms_values(hits: BeamHits, beams: Beams, unit: str, *, field_bits=13) -> np.ndarray   # int values (unit or
+                                                      # the codes 8183..8191 moved to the top of the field_bits field)
 
 so a new preset needs no registration: naming it in the scene selects it.
 A preset may also define `urg_values_at` / `lms_values_at(hits, beams, ...)`
@@ -74,17 +75,17 @@ def response_model(preset: str) -> ModuleType:
 
 
 def values_at_instants(
-    model: ModuleType, name: str, hits: Sequence[BeamHits], beams: Sequence[Beams], *args: Any
+    model: ModuleType, name: str, hits: Sequence[BeamHits], beams: Sequence[Beams], *args: Any, **keywords: Any
 ) -> np.ndarray:
     """`model.<name>` (`urg_values` or `lms_values`) at several instants, (K, N): in one pass where
     the preset offers `<name>_at`, else one instant after another."""
     batched = getattr(model, f"{name}_at", None)
     if batched is not None and _same_geometry(hits, beams):
-        return np.asarray(batched(hits, beams, *args))
+        return np.asarray(batched(hits, beams, *args, **keywords))
     if batched is not None:  # moving beams or solids: each instant has its own geometry
-        return np.concatenate([np.asarray(batched((h,), (b,), *args)) for h, b in zip(hits, beams)])
+        return np.concatenate([np.asarray(batched((h,), (b,), *args, **keywords)) for h, b in zip(hits, beams)])
     single = getattr(model, name)
-    return np.stack([np.asarray(single(h, b, *args)) for h, b in zip(hits, beams)])
+    return np.stack([np.asarray(single(h, b, *args, **keywords)) for h, b in zip(hits, beams)])
 
 
 def _same_geometry(hits: Sequence[BeamHits], beams: Sequence[Beams]) -> bool:

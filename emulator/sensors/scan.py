@@ -39,6 +39,7 @@ class Scan:
     values: np.ndarray
     unit: str = "mm"
     offsets_s: np.ndarray | None = None
+    reflector: np.ndarray | None = None  # LMS200: the echo came from a retro-reflector (bool per value)
 
     @property
     def beam_times_s(self) -> np.ndarray:

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from protocols.lms2xx.measuring import MEASURING_MODES, MeasuringMode
+
 CONFIG_BYTES_BY_PROFILE = {"v2.30": 34, "32-byte-config": 32}
 
 AVAILABILITY = 4
@@ -19,7 +21,9 @@ RESTART_TIME = 11
 
 REALTIME_INDICES_BIT = 0x02
 UNIT_CODES = {"cm": 0x00, "mm": 0x01}
-SUPPORTED_MEASURING_MODES = frozenset({0x00})  # 8 m range; fields A, B and dazzle flags
+# 00-06 and 0F; the reserved 0A-0E, 10, 11, 3D, 3E and SICK's internal 3F (energy
+# values on a per-unit curve the listing does not give, TL §3.4.2) are refused.
+SUPPORTED_MEASURING_MODES = frozenset(MEASURING_MODES)
 
 # The listing's own default: its F4 example telegram (TL Table 7-111, CRC 3C FB)
 # carries exactly this block, stop threshold 0x70 included.
@@ -48,6 +52,10 @@ class Configuration:
         return "mm" if self.block[UNITS] == UNIT_CODES["mm"] else "cm"
 
     @property
+    def measuring_mode(self) -> MeasuringMode:
+        return MEASURING_MODES[self.block[MEASURING_MODE]]
+
+    @property
     def realtime_indices(self) -> bool:
         """Availability bit 1: append scan and telegram indices to measured values."""
         return bool(self.block[AVAILABILITY] & REALTIME_INDICES_BIT)
@@ -58,7 +66,7 @@ class Configuration:
         A 77 may be shorter than the block (Player sends 7 bytes): only the
         bytes given change. Bytes beyond the block are ignored, as older
         firmware does (TL §4.4). Rejected: a unit other than cm/mm, or a
-        measuring mode other than 00 (the only coding the emulator produces).
+        reserved or internal measuring mode.
         """
         block = bytearray(self.block)
         given = data[: len(block)]

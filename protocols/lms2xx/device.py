@@ -22,7 +22,9 @@ from protocols.lms2xx.config import Configuration
 from protocols.lms2xx.framing import (
     ACK,
     DEFAULT_GAP_TOLERANCE_S,
+    FRAME_OVERHEAD,
     HOST_ADDRESS,
+    MAX_REPLY_BYTES,
     NAK,
     REPLY_ADDRESS_FLAG,
     CorruptTelegram,
@@ -38,6 +40,7 @@ from protocols.lms2xx.scanning import (
     partial_scan_grid,
     transmit_seconds,
 )
+from protocols.lms2xx.measuring import MeasuringMode
 from protocols.lms2xx.status import BAUD_CODES, DeviceStatus, status_block
 from protocols.lms2xx.values import (
     Indices,
@@ -55,6 +58,9 @@ DEFAULT_PASSWORD = b"SICK_LMS"
 NOT_ACKNOWLEDGED = b"\x92"  # valid frame, invalid command or wrong mode (TL §7.3.4)
 BAUD_SUBMODES = {0x40: 38400, 0x41: 19200, 0x42: 9600, 0x48: 500_000}
 MEAN_SCANS_RANGE = range(2, 251)
+DIRECT_SUBRANGE_BIT = 0x8000  # bit 15 of a sub-range's first value: one telegram per partial scan
+MAX_REPLY_BODY = MAX_REPLY_BYTES - FRAME_OVERHEAD - 1  # CMD + DATA, leaving room for STATUS
+PARTIAL_SCANS = 4
 _REPLY_ADDRESS = HOST_ADDRESS | REPLY_ADDRESS_FLAG
 
 
@@ -77,13 +83,27 @@ MEAN_MODES = frozenset({Mode.STREAM_MEANS, Mode.STREAM_MEAN_SUBRANGE})
 
 
 class ScanValues(Protocol):
+    """`values`: distances in the unit, or error codes at the top of a `field_bits` field.
+    `reflector` (optional, bool per beam): the echo came from a retro-reflector."""
+
     values: np.ndarray
 
 
 class ScanSource(Protocol):
-    """Device values of `count` beams at device angles start_deg + i·step_deg, at `time_s`."""
+    """Device values of `count` beams at device angles start_deg + i·step_deg, at `time_s`,
+    in a distance field `field_bits` wide (13: 8 m, 14: 16 m, 15: 32 m in mm)."""
 
-    def __call__(self, time_s: float, *, start_deg: float, step_deg: float, count: int, unit: str) -> ScanValues: ...
+    def __call__(
+        self, time_s: float, *, start_deg: float, step_deg: float, count: int, unit: str, field_bits: int
+    ) -> ScanValues: ...
+
+
+@dataclass(frozen=True)
+class _Measured:
+    """One scan as the device measured it: distance-field values and reflector flags."""
+
+    values: np.ndarray
+    reflector: np.ndarray | None
 
 
 @dataclass(frozen=True)
@@ -140,6 +160,7 @@ class Lms200Device:
         self._mode = Mode.ON_REQUEST
         self._means = 2
         self._subrange = (1, variant.count)
+        self._direct_subrange = False
         self._reader = TelegramReader(gap_tolerance_s)
         self._power_on_at: float | None = start_time
         self._line_free_at = start_time
@@ -147,7 +168,7 @@ class Lms200Device:
         self._stream: _Stream | None = None
         self._pending: _PendingReply | None = None
         self._telegram_counter = 0
-        self._scan_cache: dict[tuple[Variant, str, int], np.ndarray] = {}
+        self._scan_cache: dict[tuple[Variant, str, int, int], _Measured] = {}
         self._handlers: dict[int, Callable[[bytes, float], _Reply]] = {
             0x10: self._reset,
             0x20: self._switch_mode,
@@ -274,18 +295,18 @@ class Lms200Device:
             return []
         index = max(self._stream.next_index, latest_complete(now, self._stream.revolutions))
         self._stream.next_index = index + 1
-        return [self._send_reply(self._streamed_body(index), now, droppable=True)]
+        return [self._send_reply(body, now, droppable=True) for body in self._streamed_bodies(index)]
 
-    def _streamed_body(self, index: int) -> bytes:
+    def _streamed_bodies(self, index: int) -> list[bytes]:
         if self._mode is Mode.STREAM_PARTIAL:
-            return self._partial_scan_body(index)
+            return [self._partial_scan_body(index)]
         if self._mode is Mode.STREAM_ALL:
-            return scan_body(self._scan(index), self._config.units, indices=self._next_indices(index))
+            return [self._full_scan_body(index)]
         if self._mode is Mode.STREAM_MEANS:
-            return self._mean_body(index, self._means)
+            return [self._mean_body(index, self._means)]
         if self._mode is Mode.STREAM_SUBRANGE:
-            return self._subrange_body(index, *self._subrange)
-        return self._mean_subrange_body(index, self._means, *self._subrange)
+            return self._subrange_bodies(index, *self._subrange, direct=self._direct_subrange)
+        return [self._mean_subrange_body(index, self._means, *self._subrange)]
 
     def _start_stream(self, mode: Mode, now: float) -> None:
         """Enter a mode; continuous ones start with the first scan completed after `now`."""
@@ -301,9 +322,14 @@ class Lms200Device:
 
     # -- scans and measured-value bodies ------------------------------------
 
-    def _scan(self, index: int) -> np.ndarray:
-        """Values of full scan `index` of the current variant, measured when it completes."""
-        key = (self._variant, self._config.units, index)
+    @property
+    def _measuring(self) -> MeasuringMode:
+        return self._config.measuring_mode
+
+    def _scan(self, index: int) -> _Measured:
+        """Full scan `index` of the current variant, measured when it completes."""
+        field_bits = self._measuring.field_bits
+        key = (self._variant, self._config.units, field_bits, index)
         if key not in self._scan_cache:
             variant = self._variant
             scan = self._scan_source(
@@ -312,23 +338,34 @@ class Lms200Device:
                 step_deg=variant.step_deg,
                 count=variant.count,
                 unit=self._config.units,
+                field_bits=field_bits,
             )
-            self._scan_cache[key] = self._checked(scan.values, variant.count)
+            self._scan_cache[key] = self._checked(scan, variant.count)
             self._prune_cache(index)
         return self._scan_cache[key]
+
+    def _words(self, measured: _Measured, selection: slice | np.ndarray = slice(None)) -> np.ndarray:
+        """Wire words of (some of) a scan's values in the current measuring mode."""
+        reflector = None if measured.reflector is None else measured.reflector[selection]
+        return self._measuring.encode(measured.values[selection], reflector)
 
     def _prune_cache(self, index: int) -> None:
         """Keep only what the longest mean window (250 scans) can still need."""
         if len(self._scan_cache) > 2 * MEAN_SCANS_RANGE.stop:
             oldest = index - MEAN_SCANS_RANGE.stop
-            self._scan_cache = {key: values for key, values in self._scan_cache.items() if key[2] >= oldest}
+            self._scan_cache = {key: values for key, values in self._scan_cache.items() if key[3] >= oldest}
 
     @staticmethod
-    def _checked(values: np.ndarray, count: int) -> np.ndarray:
-        values = np.asarray(values)
+    def _checked(scan: ScanValues, count: int) -> _Measured:
+        values = np.asarray(scan.values)
         if values.shape != (count,):
             raise ValueError(f"scan source returned {values.shape} values, expected ({count},)")
-        return values
+        reflector = getattr(scan, "reflector", None)
+        if reflector is not None:
+            reflector = np.asarray(reflector, dtype=bool)
+            if reflector.shape != (count,):
+                raise ValueError(f"scan source returned {reflector.shape} reflector flags, expected ({count},)")
+        return _Measured(values, reflector)
 
     def _next_indices(self, index: int, revolutions: int | None = None) -> Indices | None:
         """Count one more measured-value telegram; its real-time indices (revolution
@@ -340,32 +377,71 @@ class Lms200Device:
         return index * (revolutions or self._variant.revolutions) % 256, telegram
 
     def _window(self, last_index: int, scans: int) -> np.ndarray:
-        return np.stack([self._scan(index) for index in range(last_index - scans + 1, last_index + 1)])
+        """Distance-field values (no flags) of `scans` scans ending with `last_index`."""
+        return np.stack([self._scan(index).values for index in range(last_index - scans + 1, last_index + 1)])
+
+    def _full_scan_body(self, index: int, every: int = 1) -> bytes:
+        words = self._words(self._scan(index), slice(None, None, every))
+        return scan_body(words, self._config.units, indices=self._next_indices(index))
 
     def _partial_scan_body(self, revolution: int) -> bytes:
         partial_index, start_deg, count = partial_scan_grid(revolution)
         scan = self._scan_source(
-            completion_time(revolution, 1), start_deg=start_deg, step_deg=1.0, count=count, unit=self._config.units
+            completion_time(revolution, 1), start_deg=start_deg, step_deg=1.0, count=count,
+            unit=self._config.units, field_bits=self._measuring.field_bits,
         )
-        values = self._checked(scan.values, count)
-        return scan_body(values, self._config.units, partial_index=partial_index, indices=self._next_indices(revolution, 1))
+        words = self._words(self._checked(scan, count))
+        return scan_body(words, self._config.units, partial_index=partial_index, indices=self._next_indices(revolution, 1))
 
     def _mean_body(self, last_index: int, scans: int) -> bytes:
-        means = mean_of_scans(self._window(last_index, scans))
+        means = mean_of_scans(self._window(last_index, scans), self._measuring.field_bits)
         return mean_body(scans, means, self._config.units, indices=self._next_indices(last_index))
 
-    def _subrange_body(self, index: int, first: int, last: int) -> bytes:
+    def _subrange_bodies(self, index: int, first: int, last: int, *, direct: bool = False) -> list[bytes]:
+        """B7 of values first..last (1-based): one telegram, or, for a direct request
+        or a range too long for one telegram, one per partial scan (TL §7.12.1: "response
+        telegrams depending on the selected angular resolution (between 1 and 4)")."""
         last = min(last, self._variant.count)
-        values = self._scan(index)[first - 1 : last]
-        return subrange_body(first, last, values, self._config.units, indices=self._next_indices(index))
+        measured = self._scan(index)
+        if not direct and self._subrange_fits(first, last):
+            words = self._words(measured, slice(first - 1, last))
+            return [subrange_body(first, last, words, self._config.units, indices=self._next_indices(index))]
+        numbers = np.arange(first, last + 1)
+        revolutions = self._variant.revolutions
+        bodies = []
+        for offset in range(revolutions):
+            selected = numbers[(numbers - 1) % revolutions == offset] - 1
+            if selected.size:
+                partial_index = offset * (PARTIAL_SCANS // revolutions)  # x.00, x.25, x.50, x.75
+                words = self._words(measured, selected)
+                bodies.append(subrange_body(
+                    first, last, words, self._config.units,
+                    partial_index=partial_index, indices=self._next_indices(index),
+                ))
+        return bodies
 
     def _mean_subrange_body(self, last_index: int, scans: int, first: int, last: int) -> bytes:
         last = min(last, self._variant.count)
-        means = mean_of_scans(self._window(last_index, scans)[:, first - 1 : last])
+        window = self._window(last_index, scans)[:, first - 1 : last]
+        means = mean_of_scans(window, self._measuring.field_bits)
         return mean_subrange_body(scans, first, last, means, self._config.units, indices=self._next_indices(last_index))
 
     def _valid_subrange(self, first: int, last: int) -> bool:
         return 1 <= first <= last <= self._variant.count
+
+    def _index_bytes(self) -> int:
+        return 2 if self._config.realtime_indices else 0
+
+    def _subrange_fits(self, first: int, last: int) -> bool:
+        """Whether a combined B7 of first..last fits one telegram."""
+        return 1 + 6 + 2 * (last - first + 1) + self._index_bytes() <= MAX_REPLY_BODY
+
+    def _mean_subrange_fits(self, first: int, last: int) -> bool:
+        """BF cannot be split into partial scans: a longer one is refused."""
+        return 1 + 1 + 6 + 2 * (last - first + 1) + self._index_bytes() <= MAX_REPLY_BODY
+
+    def _means_fit(self) -> bool:
+        return 1 + 1 + 2 + 2 * self._variant.count + self._index_bytes() <= MAX_REPLY_BODY
 
     def _schedule_mean(self, scans: int, now: float, body: Callable[[int], bytes]) -> None:
         """Answer once the next `scans` scans are measured."""
@@ -402,18 +478,22 @@ class Lms200Device:
             self._start_stream(Mode(submode), now)
             return done
         if submode == Mode.STREAM_MEANS and len(parameters) == 1 and parameters[0] in MEAN_SCANS_RANGE:
+            if not self._means_fit():
+                return _Reply((NOT_ACKNOWLEDGED,))
             self._means = parameters[0]
             self._start_stream(Mode.STREAM_MEANS, now)
             return done
         if submode == Mode.STREAM_SUBRANGE and len(parameters) == 4:
             first, last = _words(parameters)
+            self._direct_subrange = bool(first & DIRECT_SUBRANGE_BIT)
+            first &= ~DIRECT_SUBRANGE_BIT
             if self._valid_subrange(first, last):
                 self._subrange = (first, last)
                 self._start_stream(Mode.STREAM_SUBRANGE, now)
                 return done
         if submode == Mode.STREAM_MEAN_SUBRANGE and len(parameters) == 6:
             scans, first, last = _words(parameters)
-            if scans in MEAN_SCANS_RANGE and self._valid_subrange(first, last):
+            if scans in MEAN_SCANS_RANGE and self._valid_subrange(first, last) and self._mean_subrange_fits(first, last):
                 self._means, self._subrange = scans, (first, last)
                 self._start_stream(Mode.STREAM_MEAN_SUBRANGE, now)
                 return done
@@ -426,8 +506,7 @@ class Lms200Device:
         if data[0] == 0x08:
             return _Reply((self._partial_scan_body(latest_complete(now, 1)),))
         index = latest_complete(now, self._variant.revolutions)
-        values = self._scan(index)[:: {0x01: 1, 0x06: 2, 0x07: 20}[data[0]]]
-        return _Reply((scan_body(values, self._config.units, indices=self._next_indices(index)),))
+        return _Reply((self._full_scan_body(index, {0x01: 1, 0x06: 2, 0x07: 20}[data[0]]),))
 
     def _request_status(self, data: bytes, now: float) -> _Reply:
         """31 → B1: 152 bytes of live status."""
@@ -450,20 +529,24 @@ class Lms200Device:
 
     def _request_means(self, data: bytes, now: float) -> _Reply:
         """36 n → B6, the mean of the next n scans, sent when the n-th is complete."""
-        if len(data) != 1 or data[0] not in MEAN_SCANS_RANGE:
+        if len(data) != 1 or data[0] not in MEAN_SCANS_RANGE or not self._means_fit():
             return _Reply((NOT_ACKNOWLEDGED,))
         scans = data[0]
         self._schedule_mean(scans, now, lambda last: self._mean_body(last, scans))
         return _Reply(())
 
     def _request_subrange(self, data: bytes, now: float) -> _Reply:
-        """37 first,last (1-based, inclusive) → B7 from the last full scan."""
+        """37 first,last (1-based, inclusive; bit 15 of first: direct) → B7 from the last full scan,
+        in one telegram or one per partial scan."""
         if len(data) != 4:
             return _Reply((NOT_ACKNOWLEDGED,))
         first, last = _words(data)
+        direct = bool(first & DIRECT_SUBRANGE_BIT)
+        first &= ~DIRECT_SUBRANGE_BIT
         if not self._valid_subrange(first, last):
-            return _Reply((NOT_ACKNOWLEDGED,))  # also bit 15, "direct" partial sub-ranges: not offered
-        return _Reply((self._subrange_body(latest_complete(now, self._variant.revolutions), first, last),))
+            return _Reply((NOT_ACKNOWLEDGED,))
+        index = latest_complete(now, self._variant.revolutions)
+        return _Reply(tuple(self._subrange_bodies(index, first, last, direct=direct)))
 
     def _request_type(self, data: bytes, now: float) -> _Reply:
         """3A → BA: the type string."""
@@ -487,6 +570,8 @@ class Lms200Device:
         scans, (first, last) = data[0], _words(data[1:])
         if scans not in MEAN_SCANS_RANGE or not self._valid_subrange(first, last):
             return _Reply((NOT_ACKNOWLEDGED,))
+        if not self._mean_subrange_fits(first, last):
+            return _Reply((NOT_ACKNOWLEDGED,))  # a BF that long cannot be framed, nor split
         self._schedule_mean(scans, now, lambda end: self._mean_subrange_body(end, scans, first, last))
         return _Reply(())
 

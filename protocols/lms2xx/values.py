@@ -1,7 +1,8 @@
 """Measured-value replies B0, B6, B7 and BF (TL §7.5.2, 7.11.2, 7.12.2, 7.20.2) and scan means.
 
-Values are WORDs: bits 0–12 the distance (or an error code 8183–8191), bits
-13–15 flags, which the emulator leaves clear. Means suppress the flags.
+Values are WORDs, already encoded for the measuring mode (`measuring.py`):
+the distance field (13, 14 or 15 bits, error codes at its top) and the flags
+above it. Means are computed from the raw field values and carry no flags.
 """
 
 from __future__ import annotations
@@ -10,7 +11,6 @@ import numpy as np
 
 DISTANCE_MASK = 0x1FFF
 FIRST_ERROR_CODE = 8183
-ERROR_CODES = np.arange(FIRST_ERROR_CODE, 8192)
 UNIT_BITS = {"cm": 0x0000, "mm": 0x4000}  # bits 14–15 of the count word
 PARTIAL_SCAN_BIT = 0x2000  # bit 13
 PARTIAL_INDEX_SHIFT = 11  # bits 11–12: 0 → x.00°, 1 → x.25°, 2 → x.50°, 3 → x.75°
@@ -48,9 +48,13 @@ def mean_body(scans: int, values: np.ndarray, unit: str, *, indices: Indices | N
     return b"\xb6" + bytes((scans,)) + _word(count_word(len(values), unit)) + _values_and_indices(values, indices)
 
 
-def subrange_body(first: int, last: int, values: np.ndarray, unit: str, *, indices: Indices | None = None) -> bytes:
-    """B7: first and last value numbers (1-based, inclusive), count word, values."""
-    return b"\xb7" + _word(first) + _word(last) + _word(count_word(len(values), unit)) + _values_and_indices(values, indices)
+def subrange_body(
+    first: int, last: int, values: np.ndarray, unit: str, *, partial_index: int | None = None, indices: Indices | None = None
+) -> bytes:
+    """B7: first and last value numbers (1-based, inclusive), count word (with the
+    partial-scan bits when the values are one partial scan's), values."""
+    count = _word(count_word(len(values), unit, partial_index))
+    return b"\xb7" + _word(first) + _word(last) + count + _values_and_indices(values, indices)
 
 
 def mean_subrange_body(
@@ -61,19 +65,22 @@ def mean_subrange_body(
     return header + _values_and_indices(values, indices)
 
 
-def mean_of_scans(scans: np.ndarray) -> np.ndarray:
-    """Per-beam mean of a (scans, beams) array of wire values, flags suppressed.
+def mean_of_scans(scans: np.ndarray, field_bits: int = 13) -> np.ndarray:
+    """Per-beam mean of a (scans, beams) array of distance-field values (`field_bits` wide).
 
     A beam's mean is the rounded mean (halves up) of its distances; when more
-    than 20 % of its readings are error codes, it is the most frequent of
-    those codes (the lowest on a tie).
+    than 20 % of its readings are error codes (the field's top nine values),
+    it is the most frequent of those codes (the lowest on a tie).
     """
-    distances = np.asarray(scans, dtype=np.int64) & DISTANCE_MASK
-    invalid = distances >= FIRST_ERROR_CODE
+    top = (1 << field_bits) - 1
+    first_code = top - (DISTANCE_MASK - FIRST_ERROR_CODE)
+    codes = np.arange(first_code, top + 1)
+    distances = np.asarray(scans, dtype=np.int64) & top
+    invalid = distances >= first_code
     valid_counts = (~invalid).sum(axis=0)
     sums = np.where(invalid, 0, distances).sum(axis=0)
     means = np.floor(sums / np.maximum(valid_counts, 1) + 0.5).astype(np.int64)
-    code_counts = (distances[:, :, None] == ERROR_CODES).sum(axis=0)
-    most_frequent_code = ERROR_CODES[code_counts.argmax(axis=1)]
+    code_counts = (distances[:, :, None] == codes).sum(axis=0)
+    most_frequent_code = codes[code_counts.argmax(axis=1)]
     too_many_invalid = invalid.sum(axis=0) > MAX_INVALID_FRACTION * distances.shape[0]
     return np.where(too_many_invalid, most_frequent_code, means)

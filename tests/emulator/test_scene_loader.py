@@ -204,7 +204,14 @@ def test_loaded_scene_cannot_be_changed(tmp_path: Path) -> None:
 def test_builtin_materials_are_the_documented_ones() -> None:
     assert {name: material.reflectivity for name, material in BUILTIN_MATERIALS.items()} == {
         "default": 0.5, "white_paper": 0.9, "gold_paper": 0.6, "rusty_steel": 0.25, "black_velvet": 0.02,
+        "retro_reflector": 1.0,
     }
+    assert [name for name, material in BUILTIN_MATERIALS.items() if material.retroreflective] == ["retro_reflector"]
+
+
+def test_a_scene_material_may_be_retroreflective(tmp_path: Path) -> None:
+    scene = load_scene(write_scene(tmp_path, '[[materials]]\nname = "tape"\nreflectivity = 0.9\nretroreflective = true\n'))
+    assert scene.materials["tape"].retroreflective and not scene.materials["default"].retroreflective
 
 
 def test_overriding_a_builtin_may_omit_the_reflectivity(tmp_path: Path) -> None:

@@ -71,7 +71,7 @@ CASES = [
     (OBJECT + 'sphere = { radius = 1 }\nrotation_deg = "north"',
      'objects[0].rotation_deg: expected 3 numbers, got "north"'),
     (OBJECT + 'sphere = { radius = 1 }\nmaterial = "gold"',
-     'objects[0].material: unknown material "gold" (known: black_velvet, default, gold_paper, rusty_steel, white_paper)'),
+     'objects[0].material: unknown material "gold" (known: black_velvet, default, gold_paper, retro_reflector, rusty_steel, white_paper)'),
     (OBJECT + "sphere = { radius = 1 }\ncolour = 1",
      "objects[0].colour: unknown key (expected one of: name, box, sphere, cylinder, mesh, position, rotation_deg, material, body)"),
     ("[[objects]]\nsphere = { radius = 1 }", "objects[0].name: missing required key"),
@@ -113,6 +113,7 @@ CASES = [
     (PLUME + "start = 2e9", "smoke.plumes[0].stop: must be > start (2000000000.0), got 1000000000.0"),
     (PLUME + "rate = true\n", "line 8: Cannot overwrite a value (column 12)"),
     (PLUME + PLUME, 'smoke.plumes[1].name: duplicate name "fire" (also smoke.plumes[0])'),
+    ('[[materials]]\nname = "tape"\nreflectivity = 0.9\nretroreflective = 1', 'materials[0].retroreflective: expected true or false, got 1'),
     # [[sensors]]
     ('[[sensors]]\nname = "front"', "sensors[0].model: missing required key"),
     ('[[sensors]]\nname = "front"\nmodel = "utm-30lx"', 'sensors[0].model: must be one of "urg-04lx", "lms200", got "utm-30lx"'),

@@ -231,3 +231,28 @@ def test_configured_scan_follows_the_scene_options():
     urg = create_sensor(base, "urg")
     np.testing.assert_array_equal(urg.configured_scan(0.0).values, urg.scan(0.0).values)
     assert urg.configured_period_s == 0.1
+
+
+@pytest.mark.parametrize("preset", ["formsma2011", "physical"])
+def test_lms_reflector_echoes_come_from_retroreflective_materials(preset: str) -> None:
+    """The sensor decides per beam whether its echo is a reflector's; the protocol only encodes it."""
+    tape = SceneObject("tape", Box((0.1, 0.4, 4.0)), Pose((3.05, 0.0, 0.0)), "tape")
+    far = SceneObject("far", Box((0.2, 60.0, 4.0)), Pose((20.1, 0.0, 0.0)), "default")
+    materials = {**MATERIALS, "tape": Material("tape", 1.0, retroreflective=True)}
+    full = dataclasses.replace(scene([tape, far]), materials=materials, model=preset)
+    lms = LmsSensor(full, full.sensors[1], World(full))
+    narrow = lms.scan(1.0, start_deg=70.0, step_deg=1.0, count=41, unit="mm")
+    ahead = np.abs(narrow.angles_rad) < math.radians(2)
+    assert narrow.reflector is not None and narrow.reflector[ahead].all()
+    assert not narrow.reflector[np.abs(narrow.angles_rad) > math.radians(10)].any()
+    assert np.all(np.abs(narrow.values[ahead] - 3000) < 100)
+
+
+def test_lms_field_bits_widen_the_range_and_move_the_codes() -> None:
+    lms = create_sensor(scene([wall(20.0, width=60.0)]), "lms")
+    ahead = slice(88, 93)
+    assert np.all(lms.scan(1.0, start_deg=0.0, step_deg=1.0, count=181, field_bits=13).values[ahead] == 8183)
+    assert np.all(lms.scan(1.0, start_deg=0.0, step_deg=1.0, count=181, field_bits=14).values[ahead] == 16375)
+    assert np.all(np.abs(lms.scan(1.0, start_deg=0.0, step_deg=1.0, count=181, field_bits=15).values[ahead] - 20000) < 50)
+    nothing = create_sensor(scene([]), "lms").scan(1.0, start_deg=0.0, step_deg=1.0, count=181, field_bits=15)
+    assert np.all(nothing.values == 0x7FFF) and not nothing.reflector.any()

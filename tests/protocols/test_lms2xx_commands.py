@@ -25,7 +25,7 @@ class Source:
     def __init__(self) -> None:
         self.calls: list[tuple[float, float, float, int, str]] = []
 
-    def __call__(self, time_s: float, *, start_deg: float, step_deg: float, count: int, unit: str):
+    def __call__(self, time_s: float, *, start_deg: float, step_deg: float, count: int, unit: str, field_bits: int = 13):
         self.calls.append((time_s, start_deg, step_deg, count, unit))
         return SimpleNamespace(values=expected_values(time_s, start_deg, step_deg, count, unit))
 
@@ -123,7 +123,7 @@ def test_short_configure_updates_only_the_bytes_given(device: Lms200Device) -> N
 def test_rejected_configure_keeps_the_block(device: Lms200Device) -> None:
     install(device)
     unsupported = bytearray(CONFIG_77)
-    unsupported[5] = 0x03  # measuring mode 16 m: not produced by the emulator
+    unsupported[5] = 0x0A  # measuring mode 0A: reserved
     assert ask(device, b"\x77" + bytes(unsupported)) == [ACK, reply("F7 00" + CONFIG_77.hex())]
 
 
@@ -196,7 +196,7 @@ def test_sub_range_is_one_based_and_inclusive(device: Lms200Device) -> None:
     full = np.frombuffer(ask(device, b"\x30\x01")[1][7:-3], dtype="<u2")
     part = ask(device, bytes.fromhex("37 05 00 0A 00"))[1]
     np.testing.assert_array_equal(np.frombuffer(part[11:-3], dtype="<u2"), full[4:10])
-    for bad in ("37 00 00 05 00", "37 06 00 05 00", "37 01 00 6A 01", "37 01 80 05 00"):
+    for bad in ("37 00 00 05 00", "37 06 00 05 00", "37 01 00 6A 01"):
         assert ask(device, bytes.fromhex(bad)) == [ACK, NOT_ACKNOWLEDGED], bad
 
 

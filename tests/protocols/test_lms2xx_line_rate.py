@@ -19,7 +19,7 @@ BAUD_COMMANDS = {9600: b"\x20\x42", 19200: b"\x20\x41", 38400: b"\x20\x40", 500_
 VARIANT_COMMANDS = {0.5: bytes.fromhex("3B B4 00 32 00"), 1.0: bytes.fromhex("3B B4 00 64 00")}
 
 
-def source(time_s: float, *, start_deg: float, step_deg: float, count: int, unit: str):
+def source(time_s: float, *, start_deg: float, step_deg: float, count: int, unit: str, field_bits: int = 13):
     return SimpleNamespace(values=np.full(count, round(time_s * 75) % 8000))
 
 

@@ -16,7 +16,7 @@ ACK = b"\x06"
 A0_OK = bytes.fromhex("02 80 03 00 A0 00 10 16 0A")
 
 
-def source(time_s: float, *, start_deg: float, step_deg: float, count: int, unit: str):
+def source(time_s: float, *, start_deg: float, step_deg: float, count: int, unit: str, field_bits: int = 13):
     return SimpleNamespace(values=expected_values(time_s, start_deg, step_deg, count))
 
 
@@ -127,7 +127,7 @@ def test_continuous_means_equal_the_independent_mean() -> None:
 
 
 def test_means_report_an_error_code_when_too_many_readings_fail() -> None:
-    def flaky(time_s, *, start_deg, step_deg, count, unit):
+    def flaky(time_s, *, start_deg, step_deg, count, unit, field_bits=13):
         values = expected_values(time_s, start_deg, step_deg, count)
         revolution = round(time_s * 75)
         values[0] = 8191  # always: no echo

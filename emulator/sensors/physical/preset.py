@@ -79,12 +79,18 @@ def urg_values_at(hits: Sequence[BeamHits], beams: Sequence[Beams], params: Phys
     return np.where(detected, values, weak).reshape(instants.count, -1)
 
 
-def lms_values(hits: BeamHits, beams: Beams, unit: str, params: PhysicalParams = DEFAULT_PARAMS) -> np.ndarray:
-    return lms_values_at((hits,), (beams,), unit, params)[0]
+def lms_values(
+    hits: BeamHits, beams: Beams, unit: str, params: PhysicalParams = DEFAULT_PARAMS, *, field_bits: int = 13
+) -> np.ndarray:
+    return lms_values_at((hits,), (beams,), unit, params, field_bits=field_bits)[0]
 
 
-def lms_values_at(hits: Sequence[BeamHits], beams: Sequence[Beams], unit: str, params: PhysicalParams = DEFAULT_PARAMS) -> np.ndarray:
-    """LMS200 values (K, N) of the same beams at K instants, computed in one pass."""
+def lms_values_at(
+    hits: Sequence[BeamHits], beams: Sequence[Beams], unit: str, params: PhysicalParams = DEFAULT_PARAMS,
+    *, field_bits: int = 13,
+) -> np.ndarray:
+    """LMS200 values (K, N) of the same beams at K instants, computed in one pass; distances
+    and error codes in a `field_bits` wide field (the measuring mode's range)."""
     receiver = params.lms
     instants, physics, threshold = _physics(hits, beams, receiver, params)
     surfaces, smoke = physics.surfaces, physics.smoke
@@ -94,9 +100,10 @@ def lms_values_at(hits: Sequence[BeamHits], beams: Sequence[Beams], unit: str, p
         scene, sensor = instants.beams.scene, instants.beams.sensor
         echo_m = echo_m + lms_range_error_m(_scan_normals(instants), scene.seed, sensor.name, instants.beams.angles_rad)
     counts = np.rint(np.where(seen, np.maximum(echo_m, 0.0), 0.0) * lms200.UNITS_PER_M[unit]).astype(np.int64)
-    values = np.where(counts >= lms200.ABOVE_MAXIMUM, lms200.ABOVE_MAXIMUM, counts)
-    values = np.where(clean, values, LMS_SIGNAL_TO_NOISE)
-    return np.where(seen, values, lms200.NO_ECHO).reshape(instants.count, -1)
+    above_maximum = lms200.field_code(lms200.ABOVE_MAXIMUM, field_bits)
+    values = np.where(counts >= above_maximum, above_maximum, counts)
+    values = np.where(clean, values, lms200.field_code(LMS_SIGNAL_TO_NOISE, field_bits))
+    return np.where(seen, values, lms200.field_code(lms200.NO_ECHO, field_bits)).reshape(instants.count, -1)
 
 
 def _physics(
