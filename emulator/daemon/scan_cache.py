@@ -65,6 +65,7 @@ class ScanCache:
     ) -> None:
         if size < 2 * batch:
             raise ValueError(f"a scan cache of {size} cannot hold two batches of {batch}")
+        self.waits = 0  # requests that found their scan not yet computed
         self._sensor = sensor
         self._executor = executor
         self._size = size
@@ -83,6 +84,8 @@ class ScanCache:
         self._last_request = request
         future = self._future(time_s, request)
         self._follow_stream(time_s, request)
+        if not future.done():
+            self.waits += 1  # the caller's thread waits for a computation (a miss, or a late job)
         try:
             scan = future.result()
         except BaseException:

@@ -257,6 +257,7 @@ class Daemon:
         self._scan_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="scan")
         self._workers = workers if sensor_factory is None else 0  # a supplied scan source stays in-process
         self.pool: WorkerPool | None = None
+        self._caches: list[ScanCache] = []
         self._timer: PreciseTimer | None = None
         self._stopped = asyncio.Event()  # set by stop(), even before run() has begun
 
@@ -270,6 +271,7 @@ class Daemon:
         readies = []
         for ordinal, (spec, addresses) in enumerate(self._plan):
             scans = ScanCache(factory(spec), executor, phase=ordinal)
+            self._caches.append(scans)
             for position, address in enumerate(addresses):
                 device = self._device_factory(spec, scans)
                 session = DeviceSession(
@@ -354,6 +356,7 @@ class Daemon:
             "served": sum(endpoint.clients_served for endpoint in self.endpoints),
             "dropped": sum(link.outbox.dropped for link in links),
             "timers": sum(session.waiting for session in self.sessions),
+            "scan_waits": sum(cache.waits for cache in self._caches),
             "tasks": len(asyncio.all_tasks()),
             "fds": len(os.listdir("/proc/self/fd")),
         }
