@@ -18,6 +18,7 @@ from emulator.commands.options import add_scene_options, scene_from_args
 from emulator.commands import stopping
 from emulator.commands.stopping import STOP_SIGNALS
 from emulator.daemon.clock import WallClock
+from emulator.daemon.memory import keep_freed_memory
 from emulator.daemon.service import Daemon, Ready
 from emulator.errors import UserError
 from emulator.scene import Scene
@@ -103,6 +104,7 @@ def serve_until_signalled(daemon: Daemon) -> None:
     # While the scan thread computes, the loop thread must get the GIL back within
     # a fraction of a millisecond to answer commands (the default is 5 ms).
     sys.setswitchinterval(SWITCH_INTERVAL_S)
+    keep_freed_memory()  # scans computed in this process (--workers 0) reuse their temporaries
     asyncio.run(_serve(daemon))
 
 

@@ -77,8 +77,11 @@ class RemoteSensor:
 
 def _worker_main(scene: Scene, sensor_names: Sequence[str], connection: multiprocessing.connection.Connection) -> None:
     """A worker's life: build the world once, then answer jobs in order until told to stop."""
+    from emulator.daemon.memory import keep_freed_memory
     from emulator.optics import World  # imported here: the parent need not build one
     from emulator.sensors import create_sensor
+
+    keep_freed_memory()
 
     world = World(scene)
     sensors = {name: create_sensor(scene, name, world=world) for name in sensor_names}
