@@ -1,4 +1,4 @@
-"""Arguments several subcommands share: the scene, its seed and its smoke preset; a sensor's time span."""
+"""Arguments several subcommands share: the scene, its seed, its smoke preset and a smoke scale; a sensor's time span."""
 
 from __future__ import annotations
 
@@ -6,8 +6,12 @@ import argparse
 import dataclasses
 from pathlib import Path
 
+from emulator.errors import UserError
 from emulator.scene import Scene, load_scene
+from emulator.scene.smoke_scale import scale_smoke
 from emulator.sensors.response import apply_model_override
+
+MAX_SMOKE_SCALE = 1000.0
 
 
 def add_scene_options(parser: argparse.ArgumentParser, *, optional_scene: bool = False, seed: bool = True) -> None:
@@ -23,6 +27,10 @@ def add_scene_options(parser: argparse.ArgumentParser, *, optional_scene: bool =
         "--model", metavar="PRESET", default=None,
         help="smoke/sensor response preset replacing the scene's (formsma2011 or physical)",
     )
+    parser.add_argument(
+        "--smoke-scale", type=float, default=None, metavar="F",
+        help="multiply every smoke density (regions and plumes) by F; 0 = clear air (no smoke at all)",
+    )
 
 
 def scene_from_args(args: argparse.Namespace) -> Scene:
@@ -30,12 +38,19 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
     scene = apply_model_override(load_scene(args.scene), args.model)
     if getattr(args, "seed", None) is not None:
         scene = dataclasses.replace(scene, seed=args.seed)
+    if args.smoke_scale is not None:
+        if not 0.0 <= args.smoke_scale <= MAX_SMOKE_SCALE:
+            raise UserError(f"--smoke-scale must be between 0 and {MAX_SMOKE_SCALE:g}, got {args.smoke_scale}")
+        scene = scale_smoke(scene, args.smoke_scale)
     return scene
 
 
-def add_span_options(parser: argparse.ArgumentParser, *, verb: str, out_metavar: str, out_help: str) -> None:
-    """`--sensor NAME --start T0 --end T1 --out FILE`: one sensor's scans over a span of simulated time."""
-    parser.add_argument("--sensor", required=True, metavar="NAME", help=f"the scene's sensor to {verb}")
+def add_span_options(
+    parser: argparse.ArgumentParser, *, verb: str, out_metavar: str, out_help: str, required: bool = True
+) -> None:
+    """`--sensor NAME --start T0 --end T1 --out FILE`: one sensor's scans over a span of simulated time
+    (`required=False`: the caller checks --sensor and --end itself, for modes that need neither)."""
+    parser.add_argument("--sensor", required=required, metavar="NAME", help=f"the scene's sensor to {verb}")
     parser.add_argument("--start", type=float, default=0.0, metavar="T0", help="first simulated time (s)")
-    parser.add_argument("--end", type=float, required=True, metavar="T1", help="last simulated time (s)")
+    parser.add_argument("--end", type=float, required=required, metavar="T1", help="last simulated time (s)")
     parser.add_argument("--out", required=True, type=Path, metavar=out_metavar, help=out_help)
