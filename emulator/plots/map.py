@@ -1,0 +1,240 @@
+"""A top-down map of the scene at one instant (`plot --map`): what a rescue team's floor plan would show.
+
+Solids are their meshes' footprints, grey by height (floors lightest, walls
+darkest); smoke regions are shaded orange by their density at the time asked
+(relative to the densest the scene ever gets); plume particles alive at that
+time are their collision boxes in purple; each moving body's whole trajectory
+is a blue line with a dot where the body is at that time; the chosen sensor's
+scan at that time is red points (green cross: the sensor). The axes fill the
+image with equal scale in x and y, so `MapView.pixel` turns a world point into
+the pixel it is drawn at (the tests read pixels back with it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from emulator.errors import UserError
+from emulator.plots.waterfall import pyplot
+from emulator.scene import Pose, Scene, SceneObject, Shape
+from emulator.scene.bodies import Body, BodyPoses, Frames, Keyframes
+from emulator.scene.geometry import world_mesh
+from emulator.scene.plumes import particles_at
+from emulator.sensors import create_sensor, ranges_m
+from emulator.sensors.mount import SensorMount
+
+BACKGROUND_RGB = (1.0, 1.0, 1.0)
+SMOKE_RGB = (1.0, 0.55, 0.1)
+PLUME_RGB = (0.55, 0.3, 0.75)
+TRAJECTORY_RGB = (0.1, 0.3, 0.9)
+SCAN_RGB = (0.9, 0.05, 0.05)
+SENSOR_RGB = (0.0, 0.6, 0.1)
+FLOOR_TOP_M = 0.1  # objects no higher than this are floors: drawn, but they do not set the map's extent
+SOLID_DARKEST_AT_M = 2.0
+MAX_SMOKE_ALPHA = 0.75
+PLUME_ALPHA = 0.6
+MARGIN_M = 1.0
+TRAJECTORY_SAMPLES = 2000
+
+
+def solid_grey(top_m: float) -> float:
+    """Grey level of a solid whose top is at `top_m`: 0.85 for a floor down to 0.25 from 2 m up."""
+    return 0.85 - 0.6 * float(np.clip(top_m / SOLID_DARKEST_AT_M, 0.0, 1.0))
+
+
+def smoke_alpha(density: float, densest: float) -> float:
+    """Opacity of a smoke region's shade: its density over the scene's densest, up to 0.75."""
+    return 0.0 if densest <= 0 else MAX_SMOKE_ALPHA * float(np.clip(density / densest, 0.0, 1.0))
+
+
+@dataclass(frozen=True)
+class MapView:
+    """The world rectangle the image shows and the image's size: world point → pixel."""
+
+    x_range: tuple[float, float]
+    y_range: tuple[float, float]
+    width_px: int
+    height_px: int
+
+    def pixel(self, x: float, y: float) -> tuple[int, int]:
+        """(row, column) of world point (x, y); row 0 is the top (largest y)."""
+        column = (x - self.x_range[0]) / (self.x_range[1] - self.x_range[0]) * self.width_px
+        row = (self.y_range[1] - y) / (self.y_range[1] - self.y_range[0]) * self.height_px
+        return int(row), int(column)
+
+
+def sensor_poses_2d(scene: Scene, sensor: str, times_s: np.ndarray) -> np.ndarray:
+    """A sensor's (x, y, yaw rad) in the world at each of `times_s` (on its body, if it rides one):
+    the ground truth a SLAM path is compared with."""
+    frames = SensorMount(scene, scene.sensor(sensor), BodyPoses(scene.bodies)).frames(times_s)
+    rotations = frames.rotations
+    return np.column_stack([frames.positions[:, 0], frames.positions[:, 1], np.arctan2(rotations[:, 1, 0], rotations[:, 0, 0])])
+
+
+def body_frames(scene: Scene, body: str, times_s: np.ndarray) -> Frames:
+    """Body `body`'s frames at `times_s` (the scene's trajectories)."""
+    return BodyPoses(scene.bodies).frames(body, times_s)
+
+
+def trajectory_times(body: Body) -> np.ndarray:
+    """Instants covering a keyframed body's whole trajectory (empty for a live body or one that stays)."""
+    if not isinstance(body.trajectory, Keyframes) or len(body.trajectory.times) == 0:
+        return np.zeros(0)
+    keyframes = body.trajectory.times
+    return np.unique(np.concatenate([keyframes, np.linspace(keyframes[0], keyframes[-1], TRAJECTORY_SAMPLES)]))
+
+
+@dataclass(frozen=True)
+class _Footprint:
+    triangles: np.ndarray  # (n, 3, 2)
+    top_m: float
+
+
+def _object_pose(scene: Scene, obj: SceneObject, time_s: float) -> Pose:
+    """Where a solid is at `time_s`: its own pose, or its place on its body there."""
+    if obj.body is None:
+        return obj.pose
+    return body_frames(scene, obj.body, np.array([time_s])).then(obj.pose).at(0)
+
+
+def _footprint(shape: Shape, pose: Pose) -> _Footprint:
+    mesh = world_mesh(shape, pose)
+    return _Footprint(np.asarray(mesh.triangles)[:, :, :2], float(mesh.bounds[1][2]))
+
+
+def _turn(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
+    """> 0 when a → b → c turns left."""
+    return float((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+
+
+def _outline(footprint: _Footprint) -> np.ndarray:
+    """The convex hull (k, 2) of a footprint (Andrew's monotone chain): one polygon, so a translucent
+    shade is even (triangles would darken or, antialiased, lighten where their edges meet)."""
+    points = np.unique(np.round(footprint.triangles.reshape(-1, 2), 9), axis=0)
+    if len(points) < 3:
+        return points
+
+    def chain(ordered: np.ndarray) -> list[np.ndarray]:
+        hull: list[np.ndarray] = []
+        for point in ordered:
+            while len(hull) >= 2 and _turn(hull[-2], hull[-1], point) <= 0:
+                hull.pop()
+            hull.append(point)
+        return hull
+
+    lower, upper = chain(points), chain(points[::-1])
+    return np.array(lower[:-1] + upper[:-1])
+
+
+def scan_points(scene: Scene, sensor: str, time_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The sensor's scan at `time_s` as world points (n, 2), each from the sensor's pose at the
+    instant its beam was measured (error codes left out), and the pose at the time stamp (3,)."""
+    scan = create_sensor(scene, sensor).configured_scan(time_s)
+    ranges = ranges_m(scan)
+    seen = ~np.isnan(ranges)
+    beam_poses = sensor_poses_2d(scene, sensor, scan.beam_times_s[seen])
+    angles = np.asarray(scan.angles_rad, dtype=float)[seen] + beam_poses[:, 2]
+    points = beam_poses[:, :2] + ranges[seen, None] * np.column_stack([np.cos(angles), np.sin(angles)])
+    return points, sensor_poses_2d(scene, sensor, np.array([time_s]))[0]
+
+
+def _extent(parts: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    points = np.vstack([p.reshape(-1, 2) for p in parts if p.size])
+    return points.min(axis=0) - MARGIN_M, points.max(axis=0) + MARGIN_M
+
+
+def _view(low: np.ndarray, high: np.ndarray, width_px: int, height_px: int) -> MapView:
+    """Grow the shorter side so metres are square on the image."""
+    span = high - low
+    metres_per_px = max(span[0] / width_px, span[1] / height_px)
+    centre = (low + high) / 2
+    half = np.array([width_px, height_px]) * metres_per_px / 2
+    return MapView((centre[0] - half[0], centre[0] + half[0]), (centre[1] - half[1], centre[1] + half[1]),
+                   width_px, height_px)
+
+
+def draw_map(
+    scene: Scene, time_s: float, out: Path, *, sensor: str | None = None,
+    width_px: int = 1200, height_px: int = 900, extra_points: np.ndarray | None = None,
+    extra_paths: tuple[tuple[np.ndarray, tuple[float, float, float], str], ...] = (),
+    title: str | None = None,
+) -> MapView:
+    """Draw the scene from above at `time_s` into `out` (PNG); the view, for reading pixels back.
+
+    `extra_points` (n, 2) are drawn like scan points (a SLAM map); `extra_paths`
+    are (points (n, 2), rgb, label) lines (an estimated path)."""
+    plt = pyplot()
+    from matplotlib.collections import PolyCollection
+
+    solids = [_footprint(obj.shape, _object_pose(scene, obj, time_s)) for obj in scene.objects]
+    regions = [(_footprint(region.shape, region.pose), region.density) for region in scene.regions]
+    particles = [particles_at(plume, scene.seed, index, time_s) for index, plume in enumerate(scene.plumes)]
+    bodies = [body for body in scene.bodies if len(trajectory_times(body))]
+    paths = [body_frames(scene, body.name, trajectory_times(body)).positions[:, :2] for body in bodies]
+    here = [body_frames(scene, body.name, np.array([time_s])).positions[0, :2] for body in bodies]
+    points, pose = scan_points(scene, sensor, time_s) if sensor is not None else (np.zeros((0, 2)), None)
+
+    extent_parts = [f.triangles for f in solids if f.top_m > FLOOR_TOP_M] + [f.triangles for f, _ in regions]
+    extent_parts += [p.centers[:, :2] for p in particles] + paths + [np.asarray(plume.source)[:2] for plume in scene.plumes]
+    extent_parts += [np.asarray(spec.pose.position)[:2] for spec in scene.sensors if spec.body is None]
+    if pose is not None:
+        extent_parts.append(pose[:2])
+    if not any(part.size for part in extent_parts):
+        extent_parts = [f.triangles for f in solids] or [np.zeros((1, 2))]
+    view = _view(*_extent(extent_parts), width_px, height_px)
+
+    dpi = 100
+    figure = plt.figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi, facecolor=BACKGROUND_RGB)
+    axes = figure.add_axes((0, 0, 1, 1))
+    axes.set_xlim(*view.x_range)
+    axes.set_ylim(*view.y_range)
+    axes.set_axis_off()
+    for footprint in sorted(solids, key=lambda f: f.top_m):
+        grey = solid_grey(footprint.top_m)
+        axes.add_collection(PolyCollection(footprint.triangles, facecolors=(grey,) * 3, edgecolors=(grey,) * 3,
+                                           linewidths=0.3, zorder=1))
+    densest = max((max(v for _, v in density.keyframes) for _, density in regions), default=0.0)
+    for footprint, density in regions:
+        alpha = smoke_alpha(float(density.at(time_s)), densest)
+        if alpha > 0:
+            axes.add_collection(PolyCollection([_outline(footprint)], facecolors=(*SMOKE_RGB, alpha),
+                                               edgecolors="none", zorder=2))
+    for cloud in particles:
+        boxes = [np.array([[x - h, y - h], [x + h, y - h], [x + h, y + h], [x - h, y + h]])
+                 for (x, y, _), h in zip(cloud.centers, cloud.half_sizes)]
+        if boxes:
+            axes.add_collection(PolyCollection(boxes, facecolors=(*PLUME_RGB, PLUME_ALPHA), edgecolors="none", zorder=3))
+    for body, path, position in zip(bodies, paths, here):
+        axes.plot(path[:, 0], path[:, 1], color=TRAJECTORY_RGB, linewidth=2, zorder=4, label=f"{body.name} trajectory")
+        axes.plot(*position, "o", color=TRAJECTORY_RGB, markersize=9, zorder=6)
+    for path, rgb, label in extra_paths:
+        axes.plot(path[:, 0], path[:, 1], color=rgb, linewidth=1.5, zorder=5, label=label)
+    if extra_points is not None and len(extra_points):
+        axes.plot(extra_points[:, 0], extra_points[:, 1], ".", color=SCAN_RGB, markersize=2, zorder=5)
+    if pose is not None:
+        axes.plot(points[:, 0], points[:, 1], ".", color=SCAN_RGB, markersize=3, zorder=7)
+        axes.plot(*pose[:2], "+", color=SENSOR_RGB, markersize=14, markeredgewidth=3, zorder=8)
+    label = title if title is not None else f"{scene.name}: t = {time_s:g} s" + (f", scan of {sensor}" if sensor else "")
+    axes.text(0.01, 0.99, label, transform=axes.transAxes, va="top", ha="left", fontsize=10,
+              bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "none"}, zorder=9)
+    scale = _scale_bar_m(view)
+    x0, y0 = view.x_range[1] - scale - 0.03 * (view.x_range[1] - view.x_range[0]), view.y_range[0] + 0.03 * (view.y_range[1] - view.y_range[0])
+    axes.plot([x0, x0 + scale], [y0, y0], color="black", linewidth=3, zorder=9)
+    axes.text(x0 + scale / 2, y0, f"{scale:g} m", ha="center", va="bottom", fontsize=9, zorder=9)
+    try:
+        figure.savefig(out, dpi=dpi, facecolor=BACKGROUND_RGB)
+    except OSError as error:
+        raise UserError(f"cannot write {out}: {error.strerror or error}") from None
+    finally:
+        plt.close(figure)
+    return view
+
+
+def _scale_bar_m(view: MapView) -> float:
+    """A round length about a fifth of the image's width."""
+    target = (view.x_range[1] - view.x_range[0]) / 5
+    magnitude = 10 ** np.floor(np.log10(target))
+    return float(max(step * magnitude for step in (1, 2, 5) if step * magnitude <= target))
