@@ -52,6 +52,17 @@ class PreparedBeams:
     region_intervals: tuple[tuple[np.ndarray, np.ndarray], ...]
     region_lengths: tuple[np.ndarray, ...]
     beam_end_m: np.ndarray  # as BeamHits.beam_end_m
+    with_moving_solids: bool = False  # the moving bodies' solids are already in (`World.with_moving_solids`)
+
+    def rows(self, start: int, stop: int) -> PreparedBeams:
+        """Beams start..stop-1 (views): one scan's share of several scans prepared together."""
+        part = slice(start, stop)
+        return PreparedBeams(
+            self.origins[part], self.directions[part], self.max_range_m, self.solid_range_m[part], self.object_index[part],
+            self.reflectivity[part], self.cos_incidence[part],
+            tuple((entry[part], exit_[part]) for entry, exit_ in self.region_intervals),
+            tuple(length[part] for length in self.region_lengths), self.beam_end_m[part], self.with_moving_solids,
+        )
 
 
 @dataclass(frozen=True)

@@ -106,6 +106,18 @@ class World:
         objects at each beam's own instant `beam_times_s` (N,) when given)."""
         return self.cast_prepared(self.prepare(origins, directions, max_range_m), time_s, beam_times_s)
 
+    def solids(
+        self, origins: np.ndarray, directions: np.ndarray, max_range_m: float, time_s: float, beam_times_s: np.ndarray | None = None
+    ) -> Solids:
+        """First solid hit per beam at `time_s` (moving bodies' solids at `beam_times_s`), without the smoke."""
+        origins = np.asarray(origins, dtype=float)
+        directions = np.asarray(directions, dtype=float)
+        solids = Solids(*self._solids(origins, directions, max_range_m))
+        if not self.moving:
+            return solids
+        times = np.full(len(origins), time_s) if beam_times_s is None else np.asarray(beam_times_s, dtype=float)
+        return self.moving.nearest(solids, origins, directions, max_range_m, times)
+
     def prepare(self, origins: np.ndarray, directions: np.ndarray, max_range_m: float) -> PreparedBeams:
         """What the beams meet of the scene's fixed geometry: solids and region intervals."""
         origins = np.asarray(origins, dtype=float)
@@ -127,8 +139,9 @@ class World:
     def cast_prepared(self, prepared: PreparedBeams, time_s: float, beam_times_s: np.ndarray | None = None) -> BeamHits:
         """`cast` of prepared beams at `time_s`: the smoke, and the moving bodies' objects at each
         beam's instant in `beam_times_s` (N,) (all at `time_s` when None)."""
-        if self.moving:
-            prepared = self._with_moving_solids(prepared, time_s, beam_times_s)
+        if self.moving and not prepared.with_moving_solids:
+            times = np.full(len(prepared.origins), time_s) if beam_times_s is None else beam_times_s
+            prepared = self.with_moving_solids(prepared, times)
         regions = tuple(
             RegionCrossing(i, float(region.density.at(time_s)), *prepared.region_intervals[i])
             for i, region in enumerate(self.scene.regions)
@@ -151,10 +164,13 @@ class World:
             first_particle=lambda: self._first_particle(prepared.origins, prepared.directions, beam_end, time_s),
         )
 
-    def _with_moving_solids(self, prepared: PreparedBeams, time_s: float, beam_times_s: np.ndarray | None) -> PreparedBeams:
-        """`prepared` with the moving bodies' objects added where they are nearer (fresh, writeable arrays:
-        they hold for this instant only, so no cache keeps them)."""
-        times = np.full(len(prepared.origins), time_s) if beam_times_s is None else np.asarray(beam_times_s, dtype=float)
+    def with_moving_solids(self, prepared: PreparedBeams, beam_times_s: np.ndarray) -> PreparedBeams:
+        """`prepared` with the moving bodies' objects added where they are nearer at each beam's instant
+        (fresh, writeable arrays: they hold for these instants only, so no cache keeps them). Several
+        scans' beams can be done at once and cast one scan at a time (`PreparedBeams.rows`)."""
+        if not self.moving:
+            return prepared
+        times = np.asarray(beam_times_s, dtype=float)
         fixed = Solids(prepared.solid_range_m, prepared.object_index, prepared.reflectivity, prepared.cos_incidence)
         solids = self.moving.nearest(fixed, prepared.origins, prepared.directions, prepared.max_range_m, times)
         beam_end = np.minimum(solids.range_m, prepared.max_range_m)
@@ -163,7 +179,7 @@ class World:
         )
         return PreparedBeams(
             prepared.origins, prepared.directions, prepared.max_range_m, solids.range_m, solids.object_index,
-            solids.reflectivity, solids.cos_incidence, prepared.region_intervals, lengths, beam_end,
+            solids.reflectivity, solids.cos_incidence, prepared.region_intervals, lengths, beam_end, True,
         )
 
     def _solids(

@@ -70,10 +70,13 @@ _IDENTITY_ROWS = np.eye(3).reshape(9)
 
 
 def quaternion_matrix(quaternions: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) of unit quaternions (..., 4), in one matrix product over all of them."""
+    """Rotation matrices (..., 3, 3) of unit quaternions (..., 4), in one pass over all of them.
+
+    einsum, not a BLAS product: each matrix's bits then never depend on how many are computed together.
+    """
     q = np.asarray(quaternions, dtype=float)
     products = (q[..., :, None] * q[..., None, :]).reshape(*q.shape[:-1], 16)
-    return (products @ _PRODUCT_TO_MATRIX + _IDENTITY_ROWS).reshape(*q.shape[:-1], 3, 3)
+    return (np.einsum("...i,ij->...j", products, _PRODUCT_TO_MATRIX) + _IDENTITY_ROWS).reshape(*q.shape[:-1], 3, 3)
 
 
 def matrix_quaternion(rotation: np.ndarray) -> np.ndarray:
@@ -184,8 +187,12 @@ def keyframe_frames(keyframes: Keyframes, times_s: np.ndarray) -> Frames:
         fraction = np.where(span > 0, (times - keyframes.times[start]) / span, 0.0)
     fraction = np.clip(np.where(after < 0, 0.0, fraction), 0.0, 1.0)
     p0, p1 = keyframes.positions[start], keyframes.positions[end]
-    positions = p0 + fraction[:, None] * (p1 - p0)
-    quaternions = slerp(keyframes.quaternions[start], keyframes.quaternions[end], fraction)
+    q0 = keyframes.quaternions[start]
+    # at a row, or where the body stands still, exactly the row's pose: the same bits as the shortcut above,
+    # so an instant's pose never depends on which other instants are evaluated with it
+    exact = ((fraction == 0.0) | keyframes.still_after[start])[:, None]
+    positions = np.where(exact, p0, p0 + fraction[:, None] * (p1 - p0))
+    quaternions = np.where(exact, q0, slerp(q0, keyframes.quaternions[end], fraction))
     return Frames(positions, quaternion_matrix(quaternions))
 
 

@@ -8,6 +8,7 @@ any instant can be evaluated directly and reproducibly from the seed.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping, Union
@@ -107,10 +108,15 @@ class Density:
 
     keyframes: tuple[tuple[float, float], ...]
 
-    def at(self, time_s: float | np.ndarray) -> float | np.ndarray:
+    @functools.cached_property
+    def _table(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Times, values and the rows that start a step (each step's later row), built once."""
         times = np.array([k[0] for k in self.keyframes], dtype=float)
         values = np.array([k[1] for k in self.keyframes], dtype=float)
-        steps = np.flatnonzero(np.diff(times) == 0) + 1  # each step's later row
+        return times, values, np.flatnonzero(np.diff(times) == 0) + 1
+
+    def at(self, time_s: float | np.ndarray) -> float | np.ndarray:
+        times, values, steps = self._table
         if not len(steps):
             result = np.interp(time_s, times, values)
         else:  # interpolate within the run of rows between steps that holds t

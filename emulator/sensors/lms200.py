@@ -16,7 +16,7 @@ import numpy as np
 
 from emulator.optics import BeamHits, PreparedBeams, World
 from emulator.scene.model import Scene, SensorSpec
-from emulator.sensors.mount import SensorMount
+from emulator.sensors.mount import SensorMount, cast_moving
 from emulator.sensors.response import Beams, response_model, values_at_instants
 from emulator.sensors.scan import Scan, simulated_instant
 
@@ -124,19 +124,17 @@ class LmsSensor:
             self._rays[key] = _Window(angles_rad, beam_offsets_s(device_angles, step_deg), prepared)
         return self._rays[key]
 
-    def _cast(self, window: _Window, time_s: float) -> tuple[BeamHits, Beams]:
-        """The window's hits at `time_s`, each beam at the instant the mirror measures it."""
-        beam_times = time_s + window.offsets_s
+    def _casts(self, window: _Window, instants: list[float]) -> list[tuple[BeamHits, Beams]]:
+        """The window's hits at each instant, each beam at the instant the mirror measures it."""
         prepared = window.prepared
-        if prepared is not None:
-            hits = self.world.cast_prepared(prepared, time_s, beam_times)
-            return hits, Beams(self.scene, self._fixed_spec, self.world, time_s, window.angles_rad, prepared.origins, prepared.directions)
-        rays = self.mount.moving_rays(window.angles_rad, beam_times)
-        hits = self.world.cast_prepared(self.world.prepare(rays.origins, rays.directions, REACH_M), time_s, beam_times)
-        beams = Beams(
-            self.scene, self.spec, self.world, time_s, window.angles_rad, rays.origins, rays.directions, rays.rotations, beam_times
-        )
-        return hits, beams
+        if prepared is None:
+            return cast_moving(self.world, self.scene, self.spec, self.mount, window.angles_rad, window.offsets_s, instants, REACH_M)
+        casts = []
+        for time_s in instants:
+            hits = self.world.cast_prepared(prepared, time_s, time_s + window.offsets_s)
+            beams = Beams(self.scene, self._fixed_spec, self.world, time_s, window.angles_rad, prepared.origins, prepared.directions)
+            casts.append((hits, beams))
+        return casts
 
     def scan(
         self, time_s: float, *, start_deg: float = 0.0, step_deg: float = 0.5, count: int = 361, unit: str = "mm",
@@ -167,7 +165,8 @@ class LmsSensor:
             raise ValueError(f"field_bits must be one of {FIELD_BITS}, got {field_bits!r}")
         window = self._beams(start_deg, step_deg, count)
         instants = [simulated_instant(t) for t in times_s]
-        hits, beams = zip(*(self._cast(window, t) for t in instants)) if instants else ((), ())
+        casts = self._casts(window, instants)
+        hits, beams = zip(*casts) if casts else ((), ())
         values = values_at_instants(self._response, "lms_values", hits, beams, unit, field_bits=field_bits)
         values = values.astype(np.int64, copy=False)
         return [

@@ -4,7 +4,9 @@ A sensor without a body, or on a body without a trajectory, stands still: its
 beams are computed once (`fixed_rays`), exactly as a fixed sensor's. A sensor
 on a moving body gets, for one scan, the body's pose at every beam's instant
 in one vectorised pass (`moving_rays`): the beam that a turning robot fires
-late in the revolution leaves from where the robot is by then.
+late in the revolution leaves from where the robot is by then. `cast_moving`
+does that for several scans at once: one pose evaluation, one Embree pass and
+one region pass over all their beams, then each scan's smoke.
 """
 
 from __future__ import annotations
@@ -13,9 +15,11 @@ import dataclasses
 
 import numpy as np
 
+from emulator.optics import BeamHits, World
 from emulator.scene.bodies import BodyPoses, Frames, matrix_euler_deg, mounted_matrix
 from emulator.scene.model import Pose, Scene, SensorSpec
 from emulator.sensors.beam_geometry import scan_plane_rays
+from emulator.sensors.response import Beams
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,3 +73,21 @@ class SensorMount:
         local = np.stack([np.cos(angles_rad), np.sin(angles_rad), np.zeros_like(angles_rad)], axis=1)
         directions = np.einsum("nij,nj->ni", frames.rotations, local)
         return MovingRays(np.ascontiguousarray(frames.positions), directions, frames.rotations)
+
+
+def cast_moving(
+    world: World, scene: Scene, spec: SensorSpec, mount: SensorMount, angles_rad: np.ndarray, offsets_s: np.ndarray,
+    times_s: list[float], max_range_m: float,
+) -> list[tuple[BeamHits, Beams]]:
+    """Each scan at `times_s` of a sensor on a moving body: beam i of a scan at t measured at t + offsets_s[i]."""
+    n = len(angles_rad)
+    beam_times = (np.asarray(times_s, dtype=float)[:, None] + offsets_s).ravel()
+    rays = mount.moving_rays(np.tile(angles_rad, len(times_s)), beam_times)
+    prepared = world.with_moving_solids(world.prepare(rays.origins, rays.directions, max_range_m), beam_times)
+    casts = []
+    for index, time_s in enumerate(times_s):
+        rows = slice(index * n, (index + 1) * n)
+        hits = world.cast_prepared(prepared.rows(rows.start, rows.stop), time_s, beam_times[rows])
+        beams = Beams(scene, spec, world, time_s, angles_rad, rays.origins[rows], rays.directions[rows], rays.rotations[rows], beam_times[rows])
+        casts.append((hits, beams))
+    return casts

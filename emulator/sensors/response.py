@@ -9,7 +9,8 @@ A preset is a module `emulator.sensors.<preset>` defining
 so a new preset needs no registration: naming it in the scene selects it.
 A preset may also define `urg_values_at` / `lms_values_at(hits, beams, ...)`
 taking lists (one entry per instant) and returning (K, N) values: several
-instants in one pass, each row equal to the single-instant call
+instants in one pass, each row equal to the single-instant call (the
+instants' beams may differ: a sensor on a moving body casts new ones each scan)
 (`values_at_instants` falls back to one call per instant).
 `Beams` gives a model everything beyond the hits (scene, sensor, world to
 cast more rays, the beams' geometry and time).
@@ -80,18 +81,8 @@ def values_at_instants(
     """`model.<name>` (`urg_values` or `lms_values`) at several instants, (K, N): in one pass where
     the preset offers `<name>_at`, else one instant after another."""
     batched = getattr(model, f"{name}_at", None)
-    if batched is not None and _same_geometry(hits, beams):
+    if batched is not None:
         return np.asarray(batched(hits, beams, *args, **keywords))
-    if batched is not None:  # moving beams or solids: each instant has its own geometry
-        return np.concatenate([np.asarray(batched((h,), (b,), *args, **keywords)) for h, b in zip(hits, beams)])
     single = getattr(model, name)
     return np.stack([np.asarray(single(h, b, *args, **keywords)) for h, b in zip(hits, beams)])
 
-
-def _same_geometry(hits: Sequence[BeamHits], beams: Sequence[Beams]) -> bool:
-    """Whether every instant casts the same beams against the same solids (a batch may then share them)."""
-    first_hits, first_beams = hits[0], beams[0]
-    return all(
-        h.solid_range_m is first_hits.solid_range_m and b.origins is first_beams.origins and b.directions is first_beams.directions
-        for h, b in zip(hits, beams)
-    )

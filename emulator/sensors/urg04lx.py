@@ -16,7 +16,7 @@ import numpy as np
 
 from emulator.optics import BeamHits, World
 from emulator.scene.model import Scene, SensorSpec
-from emulator.sensors.mount import SensorMount
+from emulator.sensors.mount import SensorMount, cast_moving
 from emulator.sensors.response import Beams, response_model, values_at_instants
 from emulator.sensors.scan import Scan, simulated_instant
 
@@ -84,24 +84,21 @@ class UrgSensor:
         """`scan` at each of `times_s`, computed together: a preset that can (`physical`)
         shares each pass among them, which costs far less per scan."""
         instants = [simulated_instant(t) for t in times_s]
-        hits, beams = zip(*(self._cast(t) for t in instants)) if instants else ((), ())
+        casts = self._casts(instants)
+        hits, beams = zip(*casts) if casts else ((), ())
         values = np.full((len(instants), STEPS), OUTSIDE_VALID_AREA, dtype=np.int64)
         values[:, self._valid] = values_at_instants(self._response, "urg_values", hits, beams)
         return [Scan(self.name, MODEL, t, self.angles_rad, row, "mm", self.offsets_s) for t, row in zip(times_s, values)]
 
-    def _cast(self, time_s: float) -> tuple[BeamHits, Beams]:
-        """The valid steps' hits at `time_s`, each beam at the instant its step is measured."""
-        beam_times = time_s + self._valid_offsets
-        if self._prepared is not None:
-            hits = self.world.cast_prepared(self._prepared, time_s, beam_times)
-            return hits, Beams(self.scene, self._fixed_spec, self.world, time_s, self._valid_angles, self._origins, self._directions)
-        rays = self.mount.moving_rays(self._valid_angles, beam_times)
-        prepared = self.world.prepare(rays.origins, rays.directions, MAX_RANGE_M)
-        hits = self.world.cast_prepared(prepared, time_s, beam_times)
-        beams = Beams(
-            self.scene, self.spec, self.world, time_s, self._valid_angles, rays.origins, rays.directions, rays.rotations, beam_times
-        )
-        return hits, beams
+    def _casts(self, instants: list[float]) -> list[tuple[BeamHits, Beams]]:
+        """The valid steps' hits at each instant, each beam at the instant its step is measured."""
+        if self._prepared is None:
+            return cast_moving(self.world, self.scene, self.spec, self.mount, self._valid_angles, self._valid_offsets, instants, MAX_RANGE_M)
+        casts = []
+        for time_s in instants:
+            hits = self.world.cast_prepared(self._prepared, time_s, time_s + self._valid_offsets)
+            casts.append((hits, Beams(self.scene, self._fixed_spec, self.world, time_s, self._valid_angles, self._origins, self._directions)))
+        return casts
 
     def configured_scan(self, time_s: float) -> Scan:
         """The same as `scan`: the URG-04LX has one scan (its window is chosen by the protocol)."""

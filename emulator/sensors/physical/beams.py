@@ -76,11 +76,15 @@ class BeamPhysics:
 
 @dataclass(frozen=True)
 class Instants:
-    """One sensor's fixed beams at K instants, stacked: row k·N + b is beam b at instant k.
+    """One sensor's beams at K instants, stacked: row k·N + b is beam b at instant k.
 
-    `hits` and `beams` are the first instant's: their fixed arrays (N,) serve
-    every instant. What changes with time is held per row: each region's
-    density (K·N,) and the regions' optical path to each beam's end.
+    Beams that stay put (a fixed sensor among fixed solids): `hits` and `beams`
+    are the first instant's, whose fixed arrays (N,) serve every instant.
+    Beams that move (a sensor on a moving body, or solids that move): each
+    instant has its own, and `hits` / `beams` hold them all stacked (K·N rows;
+    `beams.angles_rad` stays (N,)), `per_instant` each instant's own.
+    What changes with time is held per row: each region's density (K·N,) and
+    the regions' optical path to each beam's end.
     """
 
     hits: BeamHits
@@ -88,19 +92,32 @@ class Instants:
     times_s: tuple[float, ...]
     region_density: tuple[np.ndarray, ...]
     region_optical_path: np.ndarray
+    per_instant: tuple[tuple[BeamHits, Beams], ...] | None = None
 
     @staticmethod
     def of(hits: Sequence[BeamHits], beams: Sequence[Beams]) -> Instants:
-        """The instants of `hits` / `beams` (one entry per instant, all of the same prepared beams)."""
+        """The instants of `hits` / `beams` (one entry per instant)."""
         n = len(hits[0])
         densities = np.array([[region.density for region in h.regions] for h in hits]).reshape(len(hits), -1)
         region_density = tuple(np.repeat(column, n) for column in densities.T)
         path = hits[0].region_optical_path if len(hits) == 1 else np.concatenate([h.region_optical_path for h in hits])
-        return Instants(hits[0], beams[0], tuple(b.time_s for b in beams), region_density, path)
+        times = tuple(b.time_s for b in beams)
+        if _same_beams(hits, beams):
+            return Instants(hits[0], beams[0], times, region_density, path)
+        return Instants(_stacked_hits(hits), _stacked_beams(beams), times, region_density, path, tuple(zip(hits, beams)))
 
     @property
     def count(self) -> int:
         return len(self.times_s)
+
+    @property
+    def beam_count(self) -> int:
+        """N: beams per instant."""
+        return len(self.beams.angles_rad)
+
+    def beam_rows(self, rows: np.ndarray) -> np.ndarray:
+        """The rows of `hits`' arrays that hold the stacked `rows`."""
+        return rows if self.count == 1 or self.per_instant is not None else rows % self.beam_count
 
     def smoky_regions(self) -> Iterator[tuple[RegionCrossing, np.ndarray]]:
         """Each region with density at some instant, with its density per row."""
@@ -110,10 +127,79 @@ class Instants:
 
     def crossings(self) -> BeamPuffCrossings:
         """Every instant's puffs against the beams in one pass; pairs name stacked rows."""
-        world, n = self.beams.world, len(self.hits)
+        world, n = self.beams.world, self.beam_count
         parts = [Puffs.from_particles(world.particles_at(time_s)) for time_s in self.times_s]
+        if self.per_instant is not None:  # each instant's own beams: crossed one instant at a time
+            crossed = [
+                cross_beams(puffs, b.origins, b.directions, h.beam_end_m) for puffs, (h, b) in zip(parts, self.per_instant)
+            ]
+            return BeamPuffCrossings(
+                np.concatenate([c.beam + k * n for k, c in enumerate(crossed)]),
+                *(np.concatenate([getattr(c, name) for c in crossed]) for name in ("along_m", "sigma", "column", "before_origin")),
+            )
         offsets = np.repeat(np.arange(self.count) * n, [len(part) for part in parts]) if self.count > 1 else None
         return cross_beams(Puffs.concatenate(parts), self.beams.origins, self.beams.directions, self.hits.beam_end_m, offsets)
+
+    def surface_geometry(self, receiver: ReceiverOptics, params: PhysicalParams) -> _SurfaceGeometry:
+        """The surfaces in the beams' footprints, stacked for the instants."""
+        if self.per_instant is None:
+            return _surface_geometry(self.hits, self.beams, receiver, params).stacked(self.count)
+        return _footprint_surfaces(self.hits, self.beams, receiver, params, block=self.beam_count)  # all instants in one pass
+
+
+def _same_beams(hits: Sequence[BeamHits], beams: Sequence[Beams]) -> bool:
+    """Whether every instant casts the same beams against the same solids (they may then share them)."""
+    return all(
+        h.solid_range_m is hits[0].solid_range_m and b.origins is beams[0].origins and b.directions is beams[0].directions
+        for h, b in zip(hits, beams)
+    )
+
+
+def _stacked_hits(hits: Sequence[BeamHits]) -> BeamHits:
+    """The instants' hits as one (K·N) set of rows; each region's intervals padded to the widest instant."""
+
+    def stack(name: str) -> np.ndarray:
+        return np.concatenate([getattr(h, name) for h in hits])
+
+    def padded(arrays: list[np.ndarray]) -> np.ndarray:
+        width = max(array.shape[1] for array in arrays)
+        if all(array.shape[1] == width for array in arrays):
+            return np.concatenate(arrays)
+        return np.concatenate([np.pad(a, ((0, 0), (0, width - a.shape[1])), constant_values=np.inf) for a in arrays])
+
+    regions = tuple(
+        RegionCrossing(i, hits[0].regions[i].density, padded([h.regions[i].entry_m for h in hits]), padded([h.regions[i].exit_m for h in hits]))
+        for i in range(len(hits[0].regions))
+    )
+    return dataclasses.replace(
+        hits[0],
+        solid_range_m=stack("solid_range_m"),
+        object_index=stack("object_index"),
+        reflectivity=stack("reflectivity"),
+        cos_incidence=stack("cos_incidence"),
+        beam_end_m=stack("beam_end_m"),
+        region_optical_path=stack("region_optical_path"),
+        regions=regions,
+        first_particle=_no_first_particle,
+    )
+
+
+def _no_first_particle() -> tuple[np.ndarray, np.ndarray]:
+    raise NotImplementedError("stacked hits of several instants have no single instant's particles")
+
+
+def _stacked_beams(beams: Sequence[Beams]) -> Beams:
+    def stack(name: str) -> np.ndarray | None:
+        arrays = [getattr(b, name) for b in beams]
+        return None if arrays[0] is None else np.concatenate(arrays)
+
+    return dataclasses.replace(
+        beams[0],
+        origins=stack("origins"),
+        directions=stack("directions"),
+        rotations=stack("rotations"),
+        beam_times_s=stack("beam_times_s"),
+    )
 
 
 def beam_physics_at(instants: Instants, receiver: ReceiverOptics, params: PhysicalParams) -> BeamPhysics:
@@ -123,7 +209,7 @@ def beam_physics_at(instants: Instants, receiver: ReceiverOptics, params: Physic
     scene = beams.scene
     extinction = scene.density_to_extinction
     crossings = instants.crossings()
-    geometry = _surface_geometry(hits, beams, receiver, params).stacked(instants.count)
+    geometry = instants.surface_geometry(receiver, params)
     puff_to_end_and_surfaces = crossings.optical_path_to(geometry.end_and_surfaces_m)  # one pass for every limit
     column = instants.region_optical_path + puff_to_end_and_surfaces[:, 0]
     smoke_start, smoke_end = _smoke_extent(instants, crossings, geometry)
@@ -161,7 +247,7 @@ def _region_extents(hits: BeamHits) -> tuple[tuple[np.ndarray, np.ndarray], ...]
 def _region_path_to(instants: Instants, rows: np.ndarray, limits: np.ndarray) -> np.ndarray:
     """Region optical path from the origin to `limits` (len(rows), S) for stacked rows `rows`."""
     total = np.zeros(limits.shape)
-    beams = rows if instants.count == 1 else rows % len(instants.hits)
+    beams = instants.beam_rows(rows)
     for region, density in instants.smoky_regions():
         entry, exit_ = region.entry_m.take(beams, axis=0), region.exit_m.take(beams, axis=0)  # take: cheaper than 2-D indexing
         if entry.shape[1] == 1:  # one interval per beam (a convex region): no sum over intervals
@@ -175,12 +261,16 @@ def _region_path_to(instants: Instants, rows: np.ndarray, limits: np.ndarray) ->
     return total
 
 
-def _depth_edges(hits: BeamHits, params: PhysicalParams) -> np.ndarray:
-    """Beams whose neighbour meets another object or a range differing by more than `edge_jump`."""
+def _depth_edges(hits: BeamHits, params: PhysicalParams, block: int | None = None) -> np.ndarray:
+    """Beams whose neighbour meets another object or a range differing by more than `edge_jump`
+    (with `block`, rows are scans of `block` beams stacked: the last beam of one and the first of
+    the next are no neighbours)."""
     ranges = np.where(np.isfinite(hits.solid_range_m), hits.solid_range_m, 0.0)
     objects = hits.object_index
     edge = np.zeros(len(ranges), dtype=bool)
     jump = (objects[1:] != objects[:-1]) | (np.abs(ranges[1:] - ranges[:-1]) > params.edge_jump * np.maximum(ranges[1:], ranges[:-1]))
+    if block is not None:
+        jump[block - 1 :: block] = False
     edge[1:] |= jump
     edge[:-1] |= jump
     return edge
@@ -258,7 +348,10 @@ def _surface_geometry(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, pa
     )
 
 
-def _footprint_surfaces(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, params: PhysicalParams) -> _SurfaceGeometry:
+def _footprint_surfaces(
+    hits: BeamHits, beams: Beams, receiver: ReceiverOptics, params: PhysicalParams, block: int | None = None
+) -> _SurfaceGeometry:
+    """The footprints' surfaces of `hits`; with `block`, of several scans' beams stacked (`Instants`)."""
     n = len(hits)
     sub_rays = params.sub_rays if params.mixed_pixels else 1
     ranges = np.full((n, sub_rays), np.inf)
@@ -271,10 +364,10 @@ def _footprint_surfaces(hits: BeamHits, beams: Beams, receiver: ReceiverOptics, 
     cosine[:, 0] = hits.cos_incidence
     used = np.zeros((n, sub_rays), dtype=bool)
     used[:, 0] = True
-    edge_rows = np.flatnonzero(_depth_edges(hits, params)) if sub_rays > 1 else np.zeros(0, dtype=np.int64)
+    edge_rows = np.flatnonzero(_depth_edges(hits, params, block)) if sub_rays > 1 else np.zeros(0, dtype=np.int64)
     if len(edge_rows):
         offsets = ((np.arange(sub_rays) + 0.5) / sub_rays - 0.5) * receiver.footprint_rad
-        angles = beams.angles_rad[edge_rows][:, None] + offsets
+        angles = beams.angles_rad[edge_rows if block is None else edge_rows % block][:, None] + offsets
         solids = _sub_ray_solids(beams, edge_rows, angles, hits.max_range_m)
         ranges[edge_rows], objects[edge_rows], reflectivity[edge_rows], cosine[edge_rows] = solids
         used[edge_rows] = True
@@ -393,12 +486,12 @@ def _moving_sub_ray_solids(beams: Beams, rows: np.ndarray, angles_rad: np.ndarra
         directions = local @ beams.sensor.pose.rotation_matrix().T
     origins = beams.origins[owner]
     times = beams.beam_times_s[owner] if beams.beam_times_s is not None else None
-    hits = beams.world.cast(origins, directions, max_range_m, beams.time_s, times)
+    solids = beams.world.solids(origins, directions, max_range_m, beams.time_s, times)
     return (
-        hits.solid_range_m.reshape(shape),
-        hits.object_index.reshape(shape),
-        hits.reflectivity.reshape(shape),
-        hits.cos_incidence.reshape(shape),
+        solids.range_m.reshape(shape),
+        solids.object_index.reshape(shape),
+        solids.reflectivity.reshape(shape),
+        solids.cos_incidence.reshape(shape),
     )
 
 

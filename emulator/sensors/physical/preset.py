@@ -118,7 +118,7 @@ def _physics(
 def _scan_normals(instants: Instants) -> np.ndarray:
     """Each scan's standard normal draws, one per beam, stacked as the instants' rows."""
     beams = instants.beams
-    return scan_normals(beams.scene.seed, beams.sensor.name, instants.times_s, len(instants.hits))
+    return scan_normals(beams.scene.seed, beams.sensor.name, instants.times_s, instants.beam_count)
 
 
 def _lms_echo(
