@@ -10,6 +10,8 @@ object and `lines` are printed in the table. Add a section by adding it to `SECT
   smoke, against the sensor's period: URG-04LX 100 ms; LMS200 the scan its
   scene options select against the time the mirror needs for it (1° → 1
   revolution of 13.33 ms, 0.5° → 2, 0.25° → 4; the default 361-value scan: 26.67 ms).
+  `rescue`'s sensors ride on a moving robot: each scan casts new beams, every
+  one from the pose at its own instant, and meets a door that moves.
   `fraction` is the cost of a steady stream as the daemon computes it
   (`sensor.scans` of SCAN_BATCH consecutive scans, divided by SCAN_BATCH);
   one scan computed alone (a request nobody foresaw) is its own column.
@@ -36,6 +38,7 @@ from emulator.scene import bundled_scenes, load_scene
 from emulator.scene.model import Scene, SensorSpec
 from emulator.sensors import Sensor, create_sensor, lms200, urg04lx
 from emulator.sensors.beam_geometry import scan_plane_rays
+from emulator.sensors.mount import SensorMount
 from emulator.sensors.response import PRESET_MODULES, apply_model_override
 
 SCANS_PER_BATCH = 16
@@ -49,15 +52,17 @@ def _scenes() -> list[Scene]:
     return [load_scene(bundled.name) for bundled in bundled_scenes()]
 
 
-def _sensor_beams(spec: SensorSpec) -> tuple[np.ndarray, np.ndarray, float]:
-    """Origins, directions and cast range of one scan of the sensor (valid URG steps; the LMS's window)."""
+def _sensor_beams(scene: Scene, spec: SensorSpec, world: World) -> tuple[np.ndarray, np.ndarray, float]:
+    """Origins, directions and cast range of one scan of the sensor (valid URG steps; the LMS's window),
+    from its pose at t = 0 (a sensor on a moving body: where the body starts)."""
+    pose = SensorMount(scene, spec, world.bodies).frames(np.zeros(1)).at(0)
     if spec.model == urg04lx.MODEL:
         angles = urg04lx.step_angles_rad()[urg04lx.FIRST_VALID_STEP : urg04lx.LAST_VALID_STEP + 1]
-        origins, directions = scan_plane_rays(spec.pose, angles)
+        origins, directions = scan_plane_rays(pose, angles)
         return origins, directions, urg04lx.MAX_RANGE_M
     window = lms200.configured_window(spec.options)
     angles = np.radians(lms200.device_angles_deg(window["start_deg"], window["step_deg"], window["count"]) - 90.0)
-    origins, directions = scan_plane_rays(spec.pose, angles)
+    origins, directions = scan_plane_rays(pose, angles)
     return origins, directions, lms200.REACH_M
 
 
@@ -77,7 +82,7 @@ def rays_section(quick: bool) -> Section:
     for scene in _scenes():
         world = World(dataclasses.replace(scene, regions=(), plumes=()))
         for spec in scene.sensors:
-            origins, directions, max_range = _sensor_beams(spec)
+            origins, directions, max_range = _sensor_beams(scene, spec, world)
             origins = np.ascontiguousarray(np.tile(origins, (SCANS_PER_BATCH, 1)), dtype=np.float32)
             directions = np.ascontiguousarray(np.tile(directions, (SCANS_PER_BATCH, 1)), dtype=np.float32)
             raw = _best_seconds(lambda: world.first_triangles(origins, directions, max_range), repeats)

@@ -18,7 +18,7 @@ import numpy as np
 
 from emulator.commands.options import add_scene_options, scene_from_args
 from emulator.scene.bodies import matrix_euler_deg, matrix_quaternion
-from emulator.sensors import Scan, Sensor, create_sensor, ranges_m
+from emulator.sensors import Scan, Sensor, beam_times_s, create_sensor, ranges_m
 
 ANGLE_DECIMALS = 9  # the devices' angles are exact in far fewer digits; drop float noise
 TIME_DECIMALS = 9  # beam instants: nanoseconds, far below the µs grid the world is evaluated on
@@ -46,7 +46,7 @@ def scan_json(scan: Scan, sensor: Sensor | None = None) -> dict:
     ranges = ranges_m(scan)
     extra = {} if sensor is None else {
         "pose": pose_json(sensor, scan.time_s),
-        "times_s": np.round(scan.beam_times_s, TIME_DECIMALS).tolist(),
+        "times_s": np.round(beam_times_s(scan), TIME_DECIMALS).tolist(),
     }
     return {
         "sensor": scan.sensor,

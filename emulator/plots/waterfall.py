@@ -108,11 +108,13 @@ def sensor_series(scene: Scene, sensor_name: str, start_s: float, end_s: float) 
     ranges = np.vstack([ranges_m(scan)[columns] for scan in scans])
     is_code = np.isnan(ranges)
     no_return = np.isin(values, NO_RETURN_CODES[spec.model]) & is_code
-    origins, directions = scan_plane_rays(spec.pose, angles)
+    fixed_rays = None if sensor.mount.moving else scan_plane_rays(sensor.mount.fixed_spec.pose, angles)
     mean_density = np.zeros(len(times))
     plume_range = np.full(values.shape, np.inf)
     for i, time_s in enumerate(times):
-        hits = world.cast(origins, directions, CAST_RANGE_M[spec.model], float(time_s))
+        # a sensor on a moving body: the smoke along its beams from where it is at the scan's time stamp
+        rays = fixed_rays or scan_plane_rays(sensor.mount.frames(np.array([time_s])).at(0), angles)
+        hits = world.cast(*rays, CAST_RANGE_M[spec.model], float(time_s))
         mean_density[i] = float(np.mean(hits.region_optical_path / hits.beam_end_m))
         plume_range[i] = hits.plume_hit_range_m
     return SensorSeries(

@@ -1,4 +1,4 @@
-"""The simulated sensors: `create_sensor(scene, name)` and `ranges_m(scan)`."""
+"""The simulated sensors: `create_sensor(scene, name)`, `ranges_m(scan)` and `beam_times_s(scan)`."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from emulator.sensors.urg04lx import UrgSensor
 
 Sensor = UrgSensor | LmsSensor
 
-__all__ = ["LmsSensor", "Scan", "Sensor", "UrgSensor", "create_sensor", "ranges_m"]
+__all__ = ["LmsSensor", "Scan", "Sensor", "UrgSensor", "beam_times_s", "create_sensor", "ranges_m"]
 
 
 def create_sensor(scene: Scene, name: str, world: World | None = None) -> Sensor:
@@ -29,6 +29,15 @@ def create_sensor(scene: Scene, name: str, world: World | None = None) -> Sensor
     if spec.model == lms200.MODEL:
         return LmsSensor(scene, spec, world)
     raise UserError(f"sensor {name!r}: unknown model {spec.model!r} (known: {urg04lx.MODEL}, {lms200.MODEL})")
+
+
+def beam_times_s(scan: Scan) -> np.ndarray:
+    """The simulated instant each of the scan's values was measured (its mirror's timing; ≤ `scan.time_s`)."""
+    if scan.model == urg04lx.MODEL:
+        return scan.time_s + urg04lx.angle_offsets_s(scan.angles_rad)
+    if scan.model == lms200.MODEL:
+        return scan.time_s + lms200.angle_offsets_s(scan.angles_rad)
+    raise ValueError(f"unknown sensor model {scan.model!r}")
 
 
 def ranges_m(scan: Scan) -> np.ndarray:

@@ -72,6 +72,13 @@ def beam_offsets_s(device_angles: np.ndarray, step_deg: float) -> np.ndarray:
     return offsets
 
 
+def angle_offsets_s(angles_rad: np.ndarray) -> np.ndarray:
+    """`beam_offsets_s` of a scan's sensor-frame `angles_rad` (its resolution read off their spacing)."""
+    device_angles = np.round(np.degrees(np.asarray(angles_rad)) + 90.0, 6)
+    step = float(np.round(np.min(np.diff(device_angles)), 6)) if len(device_angles) > 1 else 1.0
+    return beam_offsets_s(device_angles, step)
+
+
 @dataclass(frozen=True)
 class _Window:
     """A window's sensor-frame angles and measuring offsets (N,); a fixed sensor's beams prepared
@@ -170,10 +177,7 @@ class LmsSensor:
         values = values_at_instants(self._response, "lms_values", hits, beams, unit, field_bits=field_bits)
         values = values.astype(np.int64, copy=False)
         return [
-            Scan(
-                self.name, MODEL, t, window.angles_rad, row, unit, window.offsets_s,
-                reflector_echoes(self.scene, hit, row, unit, field_bits),
-            )
+            Scan(self.name, MODEL, t, window.angles_rad, row, unit, reflector_echoes(self.scene, hit, row, unit, field_bits))
             for t, row, hit in zip(times_s, values, hits)
         ]
 

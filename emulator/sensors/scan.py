@@ -28,8 +28,8 @@ class Scan:
     in `unit` or 8183–8191), one per entry of `angles_rad` (sensor frame:
     0 = straight ahead along +x, positive to the left). `time_s` is the
     simulated time at which the scan completed; `timestamp_ms` its
-    millisecond stamp. `offsets_s` says when each value was measured,
-    relative to `time_s` (≤ 0; the mirror sweeps the beams one after another).
+    millisecond stamp (`emulator.sensors.beam_times_s` gives the instant each
+    value was measured: the mirror sweeps the beams one after another).
     """
 
     sensor: str
@@ -38,14 +38,7 @@ class Scan:
     angles_rad: np.ndarray
     values: np.ndarray
     unit: str = "mm"
-    offsets_s: np.ndarray | None = None
     reflector: np.ndarray | None = None  # LMS200: the echo came from a retro-reflector (bool per value)
-
-    @property
-    def beam_times_s(self) -> np.ndarray:
-        """The simulated instant each value was measured at."""
-        offsets = self.offsets_s if self.offsets_s is not None else np.zeros(len(self.values))
-        return self.time_s + offsets
 
     @property
     def timestamp_ms(self) -> int:

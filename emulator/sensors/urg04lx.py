@@ -47,6 +47,12 @@ def step_offsets_s() -> np.ndarray:
     return offsets
 
 
+def angle_offsets_s(angles_rad: np.ndarray) -> np.ndarray:
+    """`step_offsets_s` of the steps at sensor-frame `angles_rad` (a scan's angles, any window)."""
+    steps = np.rint(np.asarray(angles_rad) / (2.0 * np.pi / STEPS_PER_REVOLUTION)) + FRONT_STEP
+    return (steps - (STEPS - 1)) * (PERIOD_S / STEPS_PER_REVOLUTION)
+
+
 def step_angles_rad() -> np.ndarray:
     """Sensor-frame angle of every step 0..768 (read-only: shared by every scan)."""
     angles = (np.arange(STEPS) - FRONT_STEP) * (2.0 * np.pi / STEPS_PER_REVOLUTION)
@@ -66,8 +72,7 @@ class UrgSensor:
         self.angles_rad = step_angles_rad()
         self._valid = slice(FIRST_VALID_STEP, LAST_VALID_STEP + 1)
         self._valid_angles = self.angles_rad[self._valid]
-        self.offsets_s = step_offsets_s()
-        self._valid_offsets = self.offsets_s[self._valid]
+        self._valid_offsets = step_offsets_s()[self._valid]
         self.mount = SensorMount(scene, spec, world.bodies)
         self._fixed_spec = self.mount.fixed_spec
         self._prepared = None
@@ -88,7 +93,7 @@ class UrgSensor:
         hits, beams = zip(*casts) if casts else ((), ())
         values = np.full((len(instants), STEPS), OUTSIDE_VALID_AREA, dtype=np.int64)
         values[:, self._valid] = values_at_instants(self._response, "urg_values", hits, beams)
-        return [Scan(self.name, MODEL, t, self.angles_rad, row, "mm", self.offsets_s) for t, row in zip(times_s, values)]
+        return [Scan(self.name, MODEL, t, self.angles_rad, row, "mm") for t, row in zip(times_s, values)]
 
     def _casts(self, instants: list[float]) -> list[tuple[BeamHits, Beams]]:
         """The valid steps' hits at each instant, each beam at the instant its step is measured."""

@@ -19,7 +19,7 @@ from emulator.scene import load_scene
 from emulator.scene import loader as scene_loader
 from emulator.scene.bodies import LiveEvents, euler_quaternion, live_frames, matrix_euler_deg
 from emulator.scene.model import Density, Pose
-from emulator.sensors import create_sensor, lms200, urg04lx
+from emulator.sensors import beam_times_s, create_sensor, lms200, urg04lx
 
 ROBOT = '[[bodies]]\nname = "robot"\n'
 RIDER = '[[sensors]]\nname = "urg"\nmodel = "urg-04lx"\nbody = "robot"\n'
@@ -255,7 +255,11 @@ def test_lms200_interlaced_beams_are_measured_a_revolution_apart(tmp_path: Path)
     ahead_integer, ahead_half = int(scan.values[180]), int(scan.values[181])  # 90°, 90.5°
     expected_mm = speed * lms200.PERIOD_S * (1 - 0.5 / 360) * 1000.0
     assert ahead_integer - ahead_half == pytest.approx(expected_mm, abs=2.0)
-    np.testing.assert_allclose(scan.offsets_s[[180, 181]], [-lms200.PERIOD_S * 1.25, -lms200.PERIOD_S * (0.25 - 0.5 / 360)])
+    offsets = beam_times_s(scan)[[180, 181]] - scan.time_s
+    np.testing.assert_allclose(offsets, [-lms200.PERIOD_S * 1.25, -lms200.PERIOD_S * (0.25 - 0.5 / 360)])
+    window = sensor.scan(0.3, start_deg=40.0, step_deg=0.25, count=401)  # 100° at 0.25°: four revolutions
+    revolution = np.rint((beam_times_s(window) - 0.3) / lms200.PERIOD_S + 0.5 - (window.angles_rad + np.pi / 2) / (2 * np.pi))
+    np.testing.assert_array_equal(revolution[:8], [-3, -2, -1, 0, -3, -2, -1, 0])
 
 
 def test_physical_batches_of_a_moving_sensor_equal_its_scans_one_at_a_time(tmp_path: Path) -> None:
