@@ -37,6 +37,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "replay": ("replay", "serve a recorded log through the real protocol"),
     "bench": ("bench", "measure the simulation's and protocols' speed on this machine"),
     "scenes": ("scenes", "list the bundled scenes"),
+    "ctl": ("ctl", "change a running daemon through its control API (smoke, plumes, poses, clock)"),
 }
 
 

@@ -3,7 +3,10 @@
 Measurements and interop checks must see what a driver sees: the installed
 daemon, its ptys and sockets, its line pacing. This starts it on the given
 endpoints, waits for its `ready SENSOR MODEL URI[ -> /dev/pts/N]` lines
-(CLI.md) and stops it with SIGTERM, as a service manager would.
+(CLI.md) and stops it with SIGTERM, as a service manager would. Its control
+API listens on a free loopback port (`control_url`, from its `ready control`
+line) unless the arguments say otherwise, so daemons started side by side
+never fight over the default port.
 """
 
 from __future__ import annotations
@@ -92,7 +95,11 @@ class ServeProcess:
         for endpoint in endpoints:
             self.args += ["--endpoint", endpoint]
         self.args += list(extra_args)
+        if "--control" not in self.args:
+            self.args += ["--control", "127.0.0.1:0"]
+        wants_control = self.args[self.args.index("--control") + 1] != "off"
         self.ready: list[ReadyEndpoint] = []
+        self.control_url: str | None = None
         self._stdout_lines: queue.Queue[str | None] = queue.Queue()
         self._stderr_chunks: list[str] = []
         self.process = subprocess.Popen(
@@ -106,7 +113,8 @@ class ServeProcess:
         for reader in self._readers:
             reader.start()
         try:
-            self._wait_ready(Counter(endpoint.split("=", 1)[0] for endpoint in endpoints), timeout_s)
+            expected = Counter(endpoint.split("=", 1)[0] for endpoint in endpoints)
+            self._wait_ready(expected, timeout_s, wants_control)
         except BaseException:
             self.stop()
             raise
@@ -157,9 +165,9 @@ class ServeProcess:
         for line in self.process.stderr:
             self._stderr_chunks.append(line)
 
-    def _wait_ready(self, expected: Counter[str], timeout_s: float) -> None:
+    def _wait_ready(self, expected: Counter[str], timeout_s: float, control: bool) -> None:
         deadline = time.monotonic() + timeout_s
-        while expected - Counter(ready.sensor for ready in self.ready):
+        while expected - Counter(ready.sensor for ready in self.ready) or (control and self.control_url is None):
             remaining = deadline - time.monotonic()
             try:
                 line = self._stdout_lines.get(timeout=max(remaining, 0.0))
@@ -175,6 +183,9 @@ class ServeProcess:
                     f"serve exited with status {self.process.returncode} before it was ready: "
                     f"{' '.join(self.args)}\n{self.stderr}"
                 )
+            if line.startswith("ready control "):
+                self.control_url = line.split()[2]
+                continue
             ready = parse_ready_line(line)
             if ready is not None:
                 self.ready.append(ready)

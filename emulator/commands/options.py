@@ -6,7 +6,9 @@ import argparse
 import dataclasses
 from pathlib import Path
 
+from emulator.control.events import read_events, world_events
 from emulator.errors import UserError
+from emulator.optics import World
 from emulator.scene import Scene, load_scene
 from emulator.scene.smoke_scale import scale_smoke
 from emulator.sensors.response import apply_model_override
@@ -54,3 +56,23 @@ def add_span_options(
     parser.add_argument("--start", type=float, default=0.0, metavar="T0", help="first simulated time (s)")
     parser.add_argument("--end", type=float, required=required, metavar="T1", help="last simulated time (s)")
     parser.add_argument("--out", required=True, type=Path, metavar=out_metavar, help=out_help)
+
+
+def add_events_in_option(parser: argparse.ArgumentParser, *names: str) -> None:
+    """`--events-in FILE`: an event log of live changes (`serve --events`) to apply at its times."""
+    parser.add_argument(
+        "--events-in", *names, dest="events_in", type=Path, default=None, metavar="FILE",
+        help="apply this event log of live changes (written by serve --events) at its recorded times",
+    )
+
+
+def world_from_args(scene: Scene, args: argparse.Namespace) -> World:
+    """The scene's world with the `--events-in` log applied (a live session, reproduced)."""
+    world = World(scene)
+    if getattr(args, "events_in", None) is not None:
+        for event in world_events(read_events(args.events_in, scene)):
+            try:
+                world.apply(event)
+            except ValueError as error:  # a live pose stamped before the body's last one
+                raise UserError(f"{args.events_in}: {error}") from None
+    return world

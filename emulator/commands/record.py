@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import argparse
 import itertools
+from pathlib import Path
 
-from emulator.commands.options import add_scene_options, add_span_options, scene_from_args
+from emulator.commands.options import add_events_in_option, add_scene_options, add_span_options, scene_from_args, world_from_args
 from emulator.errors import UserError
 from emulator.recording.ground_truth import with_ground_truth
 from emulator.recording.textlog import LogHeader, write_log
@@ -26,11 +27,12 @@ from emulator.sensors.series import scan_series, scan_times
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_scene_options(parser, seed=False)
     add_span_options(parser, verb="record", out_metavar="FILE", out_help="log file to write")
+    add_events_in_option(parser, "--events")
 
 
 def run(args: argparse.Namespace) -> int:
     scene = scene_from_args(args)
-    sensor = create_sensor(scene, args.sensor)
+    sensor = create_sensor(scene, args.sensor, world_from_args(scene, args))
     scans = scan_series(sensor, scan_times(sensor.configured_period_s, args.start, args.end))
     first = next(scans, None)
     if first is None:

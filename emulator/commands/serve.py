@@ -1,6 +1,7 @@
 """`lrf-emulator serve`: the daemon (CLI.md).
 
-Prints `ready SENSOR MODEL URI[ -> /dev/pts/N]` as each endpoint serves.
+Prints `ready SENSOR MODEL URI[ -> /dev/pts/N]` as each endpoint serves, then
+`ready control http://HOST:PORT` when the control API (CONTROL_API.md) listens.
 SIGINT / SIGTERM / SIGHUP / SIGQUIT stop it (symlinks removed, exit 0; during
 start-up: exit 128 + the signal's number, no traceback); SIGUSR1 prints one
 `stats` line on stderr (clients, fds, asyncio tasks) for operators and tests.
@@ -13,10 +14,14 @@ import asyncio
 import os
 import signal
 import sys
+from pathlib import Path
 
-from emulator.commands.options import add_scene_options, scene_from_args
+from emulator.commands.options import add_events_in_option, add_scene_options, scene_from_args
 from emulator.commands import stopping
 from emulator.commands.stopping import STOP_SIGNALS
+from emulator.control.events import ControlError, EventWriter, read_events
+from emulator.control.server import DEFAULT_ADDRESS, ControlAddress, ControlServer, check_exposure, parse_control_address
+from emulator.control.session import LiveSession
 from emulator.daemon.clock import WallClock
 from emulator.daemon.memory import keep_freed_memory
 from emulator.daemon.service import Daemon, Ready
@@ -36,6 +41,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="serve SENSOR on URI (pty:PATH or tcp:HOST:PORT) instead of its scene endpoints; repeatable",
     )
     parser.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
+    parser.add_argument(
+        "--control", default=DEFAULT_ADDRESS, metavar="HOST:PORT|off",
+        help=f"the control API's address (default {DEFAULT_ADDRESS}; port 0 picks a free one; off: none)",
+    )
+    parser.add_argument(
+        "--control-token", default=None, metavar="TOKEN",
+        help="require Authorization: Bearer TOKEN on the control API (needed beyond loopback)",
+    )
+    parser.add_argument("--events", type=Path, default=None, metavar="FILE", help="write each live change to FILE (JSON lines)")
+    add_events_in_option(parser)
     parser.add_argument(
         "--sensors",
         metavar="NAME[,NAME...]",
@@ -82,8 +97,21 @@ def run(args: argparse.Namespace) -> int:
     for name in overrides:
         if sensors is not None and name in {spec.name for spec in scene.sensors} and name not in sensors:
             raise UserError(f"--endpoint {name}=...: sensor {name!r} is not among --sensors {args.sensors}")
+    control = parse_control_address(args.control)
+    check_exposure(control, args.control_token)
+    replayed = read_events(args.events_in, scene) if args.events_in is not None else []
     daemon = Daemon(scene, overrides, clock, sensors=sensors, workers=workers)
-    serve_until_signalled(daemon)
+    session = LiveSession(daemon, EventWriter(args.events) if args.events is not None else None)
+    try:
+        for event in replayed:
+            if event.op != "clock":  # the clock's changes are kept in the log; scans do not depend on them
+                try:
+                    session.apply(event)
+                except ControlError as error:
+                    raise UserError(f"--events-in {args.events_in}: {error}") from None
+        serve_until_signalled(daemon, session, control, args.control_token)
+    finally:
+        session.close()
     return 0
 
 
@@ -99,27 +127,46 @@ def served_sensors(scene: Scene, listed: str | None) -> tuple[str, ...] | None:
     return names
 
 
-def serve_until_signalled(daemon: Daemon) -> None:
-    """Run the daemon until a stop signal (SIGINT, SIGTERM, SIGHUP, SIGQUIT), announcing each ready endpoint on stdout."""
+def serve_until_signalled(
+    daemon: Daemon,
+    session: LiveSession | None = None,
+    control: ControlAddress | None = None,
+    token: str | None = None,
+) -> None:
+    """Run the daemon until a stop signal (SIGINT, SIGTERM, SIGHUP, SIGQUIT), announcing each ready
+    endpoint (and the control API) on stdout."""
     # While the scan thread computes, the loop thread must get the GIL back within
     # a fraction of a millisecond to answer commands (the default is 5 ms).
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     keep_freed_memory()  # scans computed in this process (--workers 0) reuse their temporaries
-    asyncio.run(_serve(daemon))
+    asyncio.run(_serve(daemon, session, control, token))
 
 
-async def _serve(daemon: Daemon) -> None:
+async def _serve(
+    daemon: Daemon, session: LiveSession | None, control: ControlAddress | None, token: str | None
+) -> None:
     loop = asyncio.get_running_loop()
     for signum in STOP_SIGNALS:
         loop.add_signal_handler(signum, daemon.stop)
     if stopping.caught():  # raised earlier, but swallowed by some library
         daemon.stop()
     loop.add_signal_handler(signal.SIGUSR1, _print_stats, daemon)
-    await daemon.run(_announce)
+    server = ControlServer(session, control, token) if session is not None and control is not None else None
+    if server is not None:
+        await server.start()  # before any endpoint serves: a port in use stops serve at once
+    try:
+        await daemon.run(_announce, lambda: server is not None and _announce_control(server))
+    finally:
+        if server is not None:
+            await server.close()
 
 
 def _announce(ready: Ready) -> None:
     print(ready.line, flush=True)
+
+
+def _announce_control(server: ControlServer) -> None:
+    print(f"ready control {server.address.url}", flush=True)
 
 
 def _print_stats(daemon: Daemon) -> None:

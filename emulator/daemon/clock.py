@@ -2,17 +2,26 @@
 
 from __future__ import annotations
 
+import math
 import time
+from typing import Callable
 
 
 class WallClock:
-    """Simulated seconds = wall seconds since start × speed."""
+    """Simulated seconds advance at `speed` × wall seconds, unless paused.
 
-    def __init__(self, speed: float = 1.0, start_s: float = 0.0) -> None:
-        if speed <= 0:
-            raise ValueError(f"speed must be > 0, got {speed}")
+    Speed and pause can change while the daemon runs (the control API's
+    `PATCH /api/clock`): simulated time is continuous at the change, it only
+    runs at another rate from then on. A paused clock's `wall_delay` is
+    infinite: nothing simulated comes due until it resumes.
+    """
+
+    def __init__(self, speed: float = 1.0, start_s: float = 0.0, wall: Callable[[], float] = time.monotonic) -> None:
+        _check_speed(speed)
+        self._wall = wall
         self.speed = speed
-        self._origin = time.monotonic()
+        self.paused = False
+        self._origin = wall()
         self._start_s = start_s
 
     @classmethod
@@ -26,11 +35,30 @@ class WallClock:
         return cls(speed, start_s=elapsed * speed)
 
     def now(self) -> float:
-        return self._start_s + (time.monotonic() - self._origin) * self.speed
+        if self.paused:
+            return self._start_s
+        return self._start_s + (self._wall() - self._origin) * self.speed
 
     def wall_delay(self, sim_seconds: float) -> float:
-        """Wall seconds until `sim_seconds` of simulated time have passed."""
+        """Wall seconds until `sim_seconds` of simulated time have passed (inf while paused)."""
+        if self.paused:
+            return math.inf
         return max(0.0, sim_seconds / self.speed)
+
+    def set(self, *, speed: float | None = None, paused: bool | None = None) -> None:
+        """Change speed and/or pause from now on; simulated time is continuous at the change."""
+        if speed is not None:
+            _check_speed(speed)
+        self._start_s, self._origin = self.now(), self._wall()
+        if speed is not None:
+            self.speed = speed
+        if paused is not None:
+            self.paused = paused
+
+
+def _check_speed(speed: float) -> None:
+    if not (math.isfinite(speed) and speed > 0):
+        raise ValueError(f"speed must be > 0, got {speed}")
 
 
 class ManualClock:
@@ -39,6 +67,7 @@ class ManualClock:
     def __init__(self, start_s: float = 0.0) -> None:
         self._now = start_s
         self.speed = 1.0
+        self.paused = False
 
     def now(self) -> float:
         return self._now
@@ -47,4 +76,11 @@ class ManualClock:
         self._now += seconds
 
     def wall_delay(self, sim_seconds: float) -> float:
-        return max(0.0, sim_seconds)
+        return math.inf if self.paused else max(0.0, sim_seconds)
+
+    def set(self, *, speed: float | None = None, paused: bool | None = None) -> None:
+        if speed is not None:
+            _check_speed(speed)
+            self.speed = speed
+        if paused is not None:
+            self.paused = paused

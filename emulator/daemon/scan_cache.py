@@ -6,6 +6,10 @@ thread, and it is ready when the device asks. A steady stream (the same
 request at a constant stride, as a streaming device makes) is computed
 SCAN_BATCH scans per job with `sensor.scans`, which shares each numpy pass
 among them; a request nobody foresaw is still computed alone.
+
+A live change (the control API) alters the world from its instant on:
+`invalidate_from` drops every scan kept or foreseen at or after that instant
+and starts them again, so no scan computed ahead of a change is served after it.
 """
 
 from __future__ import annotations
@@ -82,8 +86,7 @@ class ScanCache:
     def __call__(self, time_s: float, **request: Any) -> Scan:
         """What a device calls: the scan for this request (computed now, alone, if not foreseen)."""
         self._last_request = request
-        future = self._future(time_s, request)
-        self._follow_stream(time_s, request)
+        future = self.request(time_s, **request)
         if not future.done():
             self.waits += 1  # the caller's thread waits for a computation (a miss, or a late job)
         try:
@@ -92,6 +95,29 @@ class ScanCache:
             self._forget(future)  # computed again if asked again (a restarted worker may succeed)
             raise
         return scan if scan.time_s == time_s else dataclasses.replace(scan, time_s=time_s)
+
+    def request(self, time_s: float, **request: Any) -> Future:
+        """The scan for this request as a future (for readers that must not block, like the control API);
+        a steady stream of them is foreseen and batched as a device's is."""
+        future = self._future(time_s, request)
+        self._follow_stream(time_s, request)
+        return future
+
+    def holds(self, time_s: float, future: Future, **request: Any) -> bool:
+        """Whether `future` is still this request's scan (a live change since may have replaced it)."""
+        return self._futures.get(_cache_key(time_s, request)) is future
+
+    def invalidate_from(self, time_s: float) -> None:
+        """Drop every scan kept or foreseen at or after `time_s` (the world changed from then on) and
+        compute them again, in one job per request, so scans foreseen stay ready when asked for."""
+        first_tick = round(time_s * TICKS_PER_S)
+        stale = [key for key in self._futures if key[0] >= first_tick]
+        again: dict[tuple, list[float]] = {}
+        for key in stale:
+            del self._futures[key]
+            again.setdefault(key[1:], []).append(key[0] / TICKS_PER_S)
+        for shape, times_s in again.items():
+            self._submit_batch(sorted(times_s), dict(shape))
 
     def pending(self, time_s: float) -> Future | None:
         """The job computing the last request's scan at `time_s`, if one was started: a daemon

@@ -14,6 +14,11 @@ showed up as scan-period jitter and command latency (docs/transports.md).
 A steady stream (the same request at a constant stride, as a streaming device
 makes) is computed SCAN_BATCH scans per job with `sensor.scans`, which shares
 each numpy pass among them; a request nobody foresaw is still computed alone.
+
+Live changes (the control API, `emulator/control`) reach the world through
+`Daemon.apply`: the world takes the event from its instant on (in every
+worker process too), every scan cache drops what it computed at or after
+that instant, and a clock change reschedules every device's wake-up.
 """
 
 from __future__ import annotations
@@ -35,6 +40,7 @@ from emulator.daemon.scan_cache import (
 from emulator.daemon.workers import ScanJobFailed, WorkerPool
 from emulator.errors import UserError
 from emulator.optics import World
+from emulator.scene.live import ClockChange, LiveEvent, LiveState, event_record
 from emulator.scene.endpoints import Address, PtyAddress, plan_endpoints
 from emulator.scene.model import Scene, SensorSpec
 from emulator.sensors import create_sensor
@@ -63,14 +69,16 @@ class Clock(Protocol):
 
     def wall_delay(self, sim_seconds: float) -> float: ...
 
+    def set(self, *, speed: float | None = None, paused: bool | None = None) -> None: ...
+
 
 class Cancellable(Protocol):
     def cancel(self) -> None: ...
 
 
-def simulated_sensors(scene: Scene) -> SensorFactory:
+def simulated_sensors(scene: Scene, world: World | None = None) -> SensorFactory:
     """Sensors computed from the scene, all sharing one optics world."""
-    world = World(scene)
+    world = world if world is not None else World(scene)
     return lambda spec: create_sensor(scene, spec.name, world=world)
 
 
@@ -155,6 +163,10 @@ class DeviceSession:
     def start(self) -> None:
         self._schedule()
 
+    def reschedule(self) -> None:
+        """Wake at the deadline again as the clock now maps it (its speed or pause changed)."""
+        self._schedule()
+
     def stop(self) -> None:
         for timer in (self._timer, self._prefetch_timer):
             if timer is not None:
@@ -172,10 +184,11 @@ class DeviceSession:
         self._poll()
 
     def _resume(self, waiting: _WaitingForScan) -> None:
-        """The scan the device waited for is ready (unless the wait was called off meanwhile)."""
+        """The scan the device waited for is ready (unless the wait was called off meanwhile);
+        woken again rather than polled: a live change may have replaced that job with another."""
         if self._timer is waiting:
             self._timer = None
-            self._poll()
+            self._wake()
 
     def _poll(self) -> None:
         """Let the device send what is due; a scan that failed (its worker died twice) is
@@ -200,6 +213,8 @@ class DeviceSession:
         deadline = self.device.next_deadline()
         if deadline is not None:
             delay = self._clock.wall_delay(deadline - self._clock.now())
+            if delay == float("inf"):
+                return  # the clock is paused: rescheduled when it resumes
             self._timer = self._call_later(delay, self._wake)
             if self._prefetch is not None:
                 lead = max(0.0, delay - PREFETCH_LEAD_S)
@@ -233,7 +248,8 @@ class Daemon:
     URIs that replace its scene endpoints; `sensor_factory` supplies scan sources
     (default: the simulation); `device_factory` builds each endpoint's device.
     `workers` > 0 computes the simulation's scans in that many worker processes
-    (at most one per sensor); `sensors` serves only those of the scene (a fleet)."""
+    (at most one per sensor); `sensors` serves only those of the scene (a fleet).
+    `live` holds the live changes applied (`apply`); None for a supplied scan source."""
 
     def __init__(
         self,
@@ -258,6 +274,15 @@ class Daemon:
         self._workers = workers if sensor_factory is None else 0  # a supplied scan source stays in-process
         self.pool: WorkerPool | None = None
         self._caches: list[ScanCache] = []
+        # The world in this process (scans on the scan thread), or only the live changes'
+        # record (scans in workers, each applying the same events to its own world).
+        self.world = World(scene) if sensor_factory is None and self._workers <= 0 else None
+        self.live: LiveState | None = self.world.live if self.world is not None else None
+        if sensor_factory is None and self.world is None:
+            self.live = LiveState(scene)
+        self.applied: list[LiveEvent] = []  # world events applied so far, for workers started later
+        self.scan_caches: dict[str, ScanCache] = {}  # per sensor served, once started
+        self._endpoint_sensors: list[tuple[str, PtyEndpoint | TcpEndpoint]] = []
         self._timer: PreciseTimer | None = None
         self._stopped = asyncio.Event()  # set by stop(), even before run() has begun
 
@@ -270,7 +295,7 @@ class Daemon:
         self._timer = PreciseTimer(loop)
         readies = []
         for ordinal, (spec, addresses) in enumerate(self._plan):
-            scans = ScanCache(factory(spec), executor, phase=ordinal)
+            scans = self.scan_caches[spec.name] = ScanCache(factory(spec), executor, phase=ordinal)
             self._caches.append(scans)
             for position, address in enumerate(addresses):
                 device = self._device_factory(spec, scans)
@@ -283,6 +308,10 @@ class Daemon:
                     self.close()
                     raise UserError(f"{self._origin(spec, position)}: {error}") from None
                 self.sessions.append(session)
+        if self.world is not None:  # readers (the control API) can ask any sensor of the world
+            for spec in self.scene.sensors:
+                if spec.name not in self.scan_caches:
+                    self.scan_caches[spec.name] = ScanCache(factory(spec), executor)
         for session in self.sessions:
             session.start()
         for ready in readies:
@@ -292,11 +321,13 @@ class Daemon:
         """Where scans are computed: in worker processes (sensors dealt out in turn), else
         on the scan thread (a supplied scan source, or `workers=0`)."""
         if self._workers <= 0:
-            return self._sensor_factory or simulated_sensors(self.scene), self._scan_thread
+            return self._sensor_factory or simulated_sensors(self.scene, self.world), self._scan_thread
         names = [spec.name for spec, _ in self._plan]
         count = min(self._workers, len(names)) or 1
         self.pool = WorkerPool(self.scene, [tuple(names[index::count]) for index in range(count)])
         self.pool.start()
+        if self.applied:  # changes applied before the workers existed (serve --events-in)
+            self.pool.apply([event_record(event) for event in self.applied])
         pool = self.pool
         return (lambda spec: pool.sensor(spec.name)), pool.executor()
 
@@ -319,18 +350,46 @@ class Daemon:
             uri, detail = str(endpoint.open(loop)), None
         session.endpoint = endpoint
         self.endpoints.append(endpoint)
+        self._endpoint_sensors.append((spec.name, endpoint))
         return Ready(spec.name, spec.model, uri, detail)
 
-    async def run(self, on_ready: Callable[[Ready], None] | None = None) -> None:
-        """Serve until `stop()`; endpoints are closed (symlinks removed) on the way out."""
+    async def run(
+        self, on_ready: Callable[[Ready], None] | None = None, on_started: Callable[[], None] | None = None
+    ) -> None:
+        """Serve until `stop()`; endpoints are closed (symlinks removed) on the way out.
+        `on_started` runs once every endpoint serves."""
         try:
             self.start(asyncio.get_running_loop(), on_ready or (lambda ready: None))
+            if on_started is not None:
+                on_started()
             await self._stopped.wait()
         finally:
             self.close()
 
     def stop(self) -> None:
         self._stopped.set()
+
+    def apply(self, event: LiveEvent) -> None:
+        """A live change from its instant on: the world takes it (here, or in every worker), and
+        every scan computed at or after that instant is computed again; a clock change reschedules
+        every device. ValueError for a live pose stamped before the body's last one."""
+        if isinstance(event, ClockChange):
+            self.clock.set(speed=event.speed, paused=event.paused)
+            for session in self.sessions:
+                session.reschedule()
+            return
+        if self.live is None:
+            raise UserError("this daemon serves recorded scans: its world cannot change")
+        self.live.apply(event)
+        self.applied.append(event)
+        if self.pool is not None:
+            self.pool.apply([event_record(event)])  # queued before the scans submitted below
+        for scans in self.scan_caches.values():
+            scans.invalidate_from(event.time_s)
+
+    def clients(self, sensor: str) -> int:
+        """How many clients are connected to the sensor's endpoints."""
+        return sum(1 for name, endpoint in self._endpoint_sensors if name == sensor and endpoint.link is not None)
 
     def close(self) -> None:
         for session in self.sessions:
@@ -339,6 +398,7 @@ class Daemon:
             endpoint.close()
         self.sessions.clear()
         self.endpoints.clear()
+        self._endpoint_sensors.clear()
         self._scan_thread.shutdown(wait=False, cancel_futures=True)
         if self.pool is not None:
             self.pool.close()

@@ -7,7 +7,7 @@ sensors assigned to it; the daemon's scan caches hand it jobs through a
 
 The protocol on the pipe, parent → worker: `("scan", job, sensor, time_s, request)`,
 `("scans", job, sensor, times_s, request)`, `("apply", job, events)` (world changes,
-JSON-able dicts applied at their simulated instants: live control, issue 13) and
+records of `scene.live.event_record`, applied at their simulated instants: live control) and
 `("stop",)`; worker → parent: `("ready", pid)` once its world is built, then
 `("done", job, result)` or `("failed", job, message)`.
 
@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from multiprocessing.reduction import ForkingPickler
 from typing import Any, Callable, Sequence
 
+from emulator.scene.live import event_from_record
 from emulator.scene.model import Scene
 from emulator.sensors.scan import Scan
 
@@ -55,10 +56,10 @@ ForkingPickler.register(types.MappingProxyType, lambda proxy: (_mapping_proxy, (
 
 
 def apply_events(world: Any, scene: Scene, events: Sequence[dict]) -> None:
-    """Apply world-change events in a worker. None are defined yet (live control, issue 13,
-    plugs in here): an event of an unknown kind is refused by name."""
-    for event in events:
-        raise ValueError(f"unknown world event kind {event.get('kind')!r}")
+    """Apply world-change events (records of `scene.live.event_record`) to a worker's world,
+    as the daemon applied them: the worker's scans then match the daemon's world."""
+    for record in events:
+        world.apply(event_from_record(record))
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,9 @@ time (region densities, particles, and the objects riding on moving bodies,
 `moving.py`, each beam at its own instant). Only the first particle per beam
 is computed on demand, as the `physical` preset never asks for it.
 `World.bodies` holds every body's pose source; a live body's poses are fed in
-through `World.bodies.add_live_pose`.
+through `World.bodies.add_live_pose`. Live changes from the control API enter
+through `World.apply` (`scene/live.py`): densities and plume emissions from
+`World.live`, poses into `World.bodies`, each from its instant on.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from emulator.optics.hits import BeamHits, PreparedBeams, RegionCrossing
 from emulator.optics.moving import MovingSolids, Solids, exact_hits, triangle_planes
 from emulator.scene.bodies import BodyPoses, mounted_matrix
 from emulator.scene.geometry import shape_mesh, world_mesh, world_to_local
+from emulator.scene.live import LiveState, WorldEvent
 from emulator.scene.model import MeshFile, Scene, SceneObject
 from emulator.scene.plumes import Particles, particles_at
 
@@ -58,8 +61,14 @@ class World:
         self._region_meshes: dict[int, trimesh.Trimesh] = {
             i: shape_mesh(region.shape) for i, region in enumerate(scene.regions) if isinstance(region.shape, MeshFile)
         }
-        self._particles_time: float | None = None
+        self.live = LiveState(scene, self.bodies)
+        self._particles_key: tuple[int, float] | None = None
         self._particles = Particles.empty()
+
+    def apply(self, event: WorldEvent) -> None:
+        """A live change, in force from its instant on (scans at or after it must be recomputed).
+        ValueError for a pose stamped before the body's last one (live poses only move forward)."""
+        self.live.apply(event)
 
     def _rides_moving_body(self, body: str | None) -> bool:
         return body is not None and self.scene.body(body).moving
@@ -79,13 +88,17 @@ class World:
 
     def particles_at(self, time_s: float) -> Particles:
         """All plumes' particles alive at `time_s` (the last instant's are kept: a scan asks twice)."""
-        if time_s != self._particles_time:
+        key = (self.live.generation, time_s)  # a live change makes the kept particles stale
+        if key != self._particles_key:
             particles = Particles.concatenate(
-                [particles_at(plume, self.scene.seed, i, time_s) for i, plume in enumerate(self.scene.plumes)]
+                [
+                    particles_at(plume, self.scene.seed, i, time_s, self.live.plume_segments(i))
+                    for i, plume in enumerate(self.scene.plumes)
+                ]
             )
             for array in (particles.centers, particles.half_sizes, particles.density, particles.index):
                 array.flags.writeable = False  # shared by every caller at this instant
-            self._particles, self._particles_time = particles, time_s
+            self._particles, self._particles_key = particles, key
         return self._particles
 
     def first_triangles(self, origins: np.ndarray, directions: np.ndarray, max_range_m: float) -> np.ndarray:
@@ -143,8 +156,8 @@ class World:
             times = np.full(len(prepared.origins), time_s) if beam_times_s is None else beam_times_s
             prepared = self.with_moving_solids(prepared, times)
         regions = tuple(
-            RegionCrossing(i, float(region.density.at(time_s)), *prepared.region_intervals[i])
-            for i, region in enumerate(self.scene.regions)
+            RegionCrossing(i, self.live.region_density(i, time_s), *prepared.region_intervals[i])
+            for i in range(len(self.scene.regions))
         )
         optical_path = np.zeros(len(prepared.origins))
         for crossing, length in zip(regions, prepared.region_lengths):

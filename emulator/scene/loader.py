@@ -161,21 +161,30 @@ def _describe_toml_error(error: tomllib.TOMLDecodeError, text: str) -> str:
 # --------------------------------------------------------------------------- typed access with places
 
 
-def _show(value: Any) -> str:
-    """A value as the user wrote it in TOML, short enough for a one-line message."""
+def _show(value: Any, depth: int = 0) -> str:
+    """A value as the user wrote it in TOML, short enough for a one-line message
+    (nesting past a few levels is elided: a JSON body can nest deeper than the stack)."""
     if isinstance(value, bool):
         text = "true" if value else "false"
     elif isinstance(value, str):
-        text = json.dumps(value)
+        text = json.dumps(value[:64])
     elif isinstance(value, float) and not math.isfinite(value):
         text = "nan" if math.isnan(value) else ("inf" if value > 0 else "-inf")
+    elif isinstance(value, (list, dict)) and depth >= _SHOWN_DEPTH:
+        text = "[...]" if isinstance(value, list) else "{ ... }"
     elif isinstance(value, list):
-        text = "[" + ", ".join(_show(item) for item in value) + "]"
+        text = "[" + ", ".join(_show(item, depth + 1) for item in value[:8]) + (", ..." if len(value) > 8 else "") + "]"
     elif isinstance(value, dict):
-        text = "{ " + ", ".join(f"{key} = {_show(item)}" for key, item in value.items()) + " }"
+        items = list(value.items())[:8]
+        text = "{ " + ", ".join(f"{key} = {_show(item, depth + 1)}" for key, item in items) + " }"
+    elif isinstance(value, int) and abs(value) >= 10**18:
+        text = f"{'-' if value < 0 else ''}{str(abs(value))[:6]}...e{len(str(abs(value))) - 1}"
     else:
         text = str(value)
     return text if len(text) <= 60 else text[:57] + "..."
+
+
+_SHOWN_DEPTH = 4
 
 
 @dataclass(frozen=True)
@@ -192,13 +201,18 @@ class _Place:
         return _Place(self.file, f"{self.path}[{position}]")
 
     def error(self, message: str) -> SceneError:
-        return SceneError(f"{self.file}: {self.path}: {message}" if self.path else f"{self.file}: {message}")
+        where = ": ".join(part for part in (self.file, self.path) if part)
+        return SceneError(f"{where}: {message}" if where else message, self.path)
 
 
 def _as_number(value: Any, place: _Place) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise place.error(f"expected a number, got {_show(value)}")
-    if not math.isfinite(value):
+    try:
+        finite = math.isfinite(value)
+    except OverflowError:  # an integer too large for a float (JSON has no limit)
+        finite = False
+    if not finite:
         raise place.error(f"must be finite, got {_show(value)}")
     return float(value)
 
@@ -335,6 +349,13 @@ class _Table:
 
     def pose(self) -> Pose:
         return Pose(self.vec3("position", ORIGIN), self.vec3("rotation_deg", ORIGIN))
+
+
+def checked_values(where: str, data: Any, allowed: Sequence[str]) -> _Table:
+    """Values from outside the scene file (a control API body, an event log line), to be read by
+    the scene's own rules and words: errors read `where.key: ...`, e.g.
+    `smoke.regions[room].density: must be >= 0, got -1`; unknown keys are refused."""
+    return _as_table(data, _Place("", where), allowed)
 
 
 # --------------------------------------------------------------------------- the scene's parts

@@ -120,25 +120,77 @@ def _offset_block(seed: int, plume_index: int, block: int, spread: float) -> np.
     return offsets
 
 
-def alive_indices(plume: Plume, time_s: float) -> np.ndarray:
-    """Indices i of the particles alive at `time_s`, ascending."""
-    if time_s < plume.start:
+@dataclass(frozen=True)
+class EmissionSegment:
+    """A stretch of a plume's emission with one rate and wind (live changes split the scene's one).
+
+    Births run at `first_birth + j / rate` for j >= 0 while before `end`;
+    the j-th of them is the plume's particle `first_index + j`, so every
+    particle keeps one index, one random offset and the wind of its birth.
+    """
+
+    first_birth: float
+    end: float
+    rate: float
+    wind: tuple[float, float, float]
+    first_index: int
+
+    def births_before(self, time_s: float) -> int:
+        """How many of the segment's births come before `time_s` (its count, for time_s = end)."""
+        if time_s <= self.first_birth:
+            return 0
+        count = int(np.ceil((time_s - self.first_birth) * self.rate))
+        while count > 0 and self.first_birth + (count - 1) / self.rate >= time_s:
+            count -= 1
+        while self.first_birth + count / self.rate < time_s:
+            count += 1
+        return count
+
+
+def scene_emission(plume: Plume) -> EmissionSegment:
+    """The scene's own emission: from `start` to `stop` at `rate`, in `wind`."""
+    return EmissionSegment(plume.start, plume.stop, plume.rate, plume.wind, 0)
+
+
+def alive_indices(plume: Plume, time_s: float, segment: EmissionSegment | None = None) -> np.ndarray:
+    """Indices i of the segment's particles (default: the scene's emission) alive at `time_s`, ascending."""
+    segment = segment or scene_emission(plume)
+    if time_s < segment.first_birth:
         return np.zeros(0, dtype=np.int64)
-    newest = np.floor((time_s - plume.start) * plume.rate) + 1
-    emitted = np.ceil((plume.stop - plume.start) * plume.rate) + 1
-    oldest = np.floor((time_s - plume.lifetime - plume.start) * plume.rate) - 1
+    start, rate = segment.first_birth, segment.rate
+    newest = np.floor((time_s - start) * rate) + 1
+    emitted = np.ceil((segment.end - start) * rate) + 1
+    oldest = np.floor((time_s - plume.lifetime - start) * rate) - 1
     first, last = int(max(oldest, 0)), int(min(newest, emitted))
     candidates = np.arange(first, last + 1, dtype=np.int64)
-    birth = plume.start + candidates / plume.rate
-    alive = (birth <= time_s) & (time_s < birth + plume.lifetime) & (birth < plume.stop)
-    return candidates[alive]
+    birth = start + candidates / rate
+    alive = (birth <= time_s) & (time_s < birth + plume.lifetime) & (birth < segment.end)
+    return candidates[alive] + segment.first_index
 
 
-def particles_at(plume: Plume, seed: int, plume_index: int, time_s: float) -> Particles:
-    """The plume's particles alive at `time_s`, vectorised over particles."""
-    index = alive_indices(plume, time_s)
-    age = time_s - (plume.start + index / plume.rate)
-    velocity = np.asarray(plume.velocity, dtype=float) + np.asarray(plume.wind, dtype=float)
+def particles_at(
+    plume: Plume, seed: int, plume_index: int, time_s: float, segments: tuple[EmissionSegment, ...] | None = None
+) -> Particles:
+    """The plume's particles alive at `time_s`, vectorised over particles.
+
+    `segments` (ascending, from `emission_segments`) replace the scene's one
+    emission when live changes have split it; only those that can still
+    have a particle alive are evaluated.
+    """
+    if segments is None:
+        return _segment_particles(plume, seed, plume_index, time_s, scene_emission(plume))
+    parts = [
+        _segment_particles(plume, seed, plume_index, time_s, segment)
+        for segment in segments
+        if segment.end + plume.lifetime > time_s >= segment.first_birth
+    ]
+    return Particles.concatenate(parts)
+
+
+def _segment_particles(plume: Plume, seed: int, plume_index: int, time_s: float, segment: EmissionSegment) -> Particles:
+    index = alive_indices(plume, time_s, segment)
+    age = time_s - (segment.first_birth + (index - segment.first_index) / segment.rate)
+    velocity = np.asarray(plume.velocity, dtype=float) + np.asarray(segment.wind, dtype=float)
     offsets = _cached_velocity_offsets(seed, plume_index, index, plume.spread)
     centers = np.asarray(plume.source, dtype=float) + (velocity + offsets) * age[:, None]
     half_sizes = 0.5 * (plume.size + plume.growth * age)

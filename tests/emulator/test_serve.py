@@ -219,7 +219,7 @@ def test_tcp_port_0_in_a_scene_file_means_what_it_means_on_endpoint(tmp_path: Pa
     scene.write_text('[[sensors]]\nname = "urg"\nmodel = "urg-04lx"\nendpoints = ["tcp:127.0.0.1:0"]\n')
     for extra in ([], ["--endpoint", "urg=tcp:127.0.0.1:0"]):
         process = subprocess.Popen(
-            [*serve_command(), "serve", str(scene), *extra], cwd=tmp_path, stdout=subprocess.PIPE, text=True
+            [*serve_command(), "serve", str(scene), *extra, "--control", "off"], cwd=tmp_path, stdout=subprocess.PIPE, text=True
         )
         try:
             ready = parse_ready_line(process.stdout.readline())
@@ -300,7 +300,7 @@ def test_scene_endpoints_are_served_with_pty_paths_relative_to_the_cwd(tmp_path:
     workdir = tmp_path / "work"
     workdir.mkdir()
     process = subprocess.Popen(
-        [*serve_command(), "serve", str(scene)], cwd=workdir, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        [*serve_command(), "serve", str(scene), "--control", "off"], cwd=workdir, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
     try:
         assert select.select([process.stdout], [], [], 30)[0], "no ready line in 30 s"

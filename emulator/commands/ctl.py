@@ -1,0 +1,86 @@
+"""`lrf-emulator ctl ...`: change a running daemon from a terminal (CONTROL_API.md).
+
+    ctl state                              the clock, densities, plumes, poses, clients (JSON)
+    ctl set region NAME density D          a smoke region holds D from now on
+    ctl plume NAME on|off|rate R|wind X Y Z
+    ctl pose BODY X Y [Z] [--yaw DEG]      a live body's pose
+    ctl clock [--speed X] [--pause|--resume]
+    ctl watch SENSOR [--count N]           a line per scan
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from emulator.control.ctl import DEFAULT_URL, ControlClient
+from emulator.errors import UserError
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--url", default=DEFAULT_URL, help=f"the control API (default {DEFAULT_URL})")
+    parser.add_argument("--token", default=None, help="Bearer token, if serve has --control-token")
+    actions = parser.add_subparsers(dest="action", metavar="ACTION", parser_class=type(parser))
+    actions.required = True
+    actions.add_parser("state", help="print the live state as JSON")
+    setter = actions.add_parser("set", help="set a smoke region's density: set region NAME density D")
+    setter.add_argument("what", choices=["region"])
+    setter.add_argument("name")
+    setter.add_argument("key", choices=["density"])
+    setter.add_argument("value", type=float)
+    plume = actions.add_parser("plume", help="plume NAME on|off|rate R|wind X Y Z")
+    plume.add_argument("name")
+    plume.add_argument("change", choices=["on", "off", "rate", "wind"])
+    plume.add_argument("values", nargs="*", type=float)
+    pose = actions.add_parser("pose", help="pose BODY X Y [Z] [--yaw DEG]")
+    pose.add_argument("name")
+    pose.add_argument("position", nargs="+", type=float, metavar="X")
+    pose.add_argument("--yaw", type=float, default=0.0, metavar="DEG")
+    clock = actions.add_parser("clock", help="clock [--speed X] [--pause|--resume]")
+    clock.add_argument("--speed", type=float, default=None)
+    running = clock.add_mutually_exclusive_group()
+    running.add_argument("--pause", action="store_true")
+    running.add_argument("--resume", action="store_true")
+    watch = actions.add_parser("watch", help="watch SENSOR: a line per scan")
+    watch.add_argument("sensor")
+    watch.add_argument("--count", type=int, default=None, help="stop after N scans")
+
+
+def run(args: argparse.Namespace) -> int:
+    client = ControlClient(args.url, args.token)
+    if args.action == "state":
+        print(json.dumps(client.state(), indent=2))
+        return 0
+    if args.action == "watch":
+        client.watch(args.sensor, args.count)
+        return 0
+    answer = _change(client, args)
+    print(f"applied {json.dumps(answer['applied'])}")
+    return 0
+
+
+def _change(client: ControlClient, args: argparse.Namespace) -> dict:
+    if args.action == "set":
+        return client.set_region(args.name, args.value)
+    if args.action == "plume":
+        expected = {"on": 0, "off": 0, "rate": 1, "wind": 3}[args.change]
+        if len(args.values) != expected:
+            raise UserError(f"plume {args.change}: expected {expected} number(s), got {len(args.values)}")
+        if args.change in ("on", "off"):
+            return client.plume(args.name, emitting=args.change == "on")
+        if args.change == "rate":
+            return client.plume(args.name, rate=args.values[0])
+        return client.plume(args.name, wind=list(args.values))
+    if args.action == "pose":
+        if len(args.position) not in (2, 3):
+            raise UserError(f"pose: expected X Y [Z], got {len(args.position)} numbers")
+        position = [*args.position, 0.0][:3]
+        return client.pose(args.name, position, [0.0, 0.0, args.yaw])
+    changes: dict = {}
+    if args.speed is not None:
+        changes["speed"] = args.speed
+    if args.pause or args.resume:
+        changes["paused"] = bool(args.pause)
+    if not changes:
+        raise UserError("clock: give --speed X, --pause or --resume")
+    return client.clock(**changes)

@@ -1,0 +1,128 @@
+"""`lrf-emulator ctl`: a terminal client of the control API (CONTROL_API.md).
+
+Each subcommand is one request; the answer is printed as JSON (`state`) or
+as one line saying what was applied. `watch SENSOR` prints a line per scan
+from the WebSocket until interrupted. Any refusal or unreachable daemon is
+one line on stderr and exit status 2 (a `UserError`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import urllib.error
+import urllib.request
+from typing import Any
+
+from emulator.errors import UserError
+
+DEFAULT_URL = "http://127.0.0.1:8765"
+TIMEOUT_S = 10.0
+
+
+class ControlClient:
+    """Requests to one daemon's control API; `token` is sent as a Bearer token."""
+
+    def __init__(self, url: str = DEFAULT_URL, token: str | None = None) -> None:
+        self.url = url.rstrip("/")
+        self.token = token
+
+    def _headers(self) -> dict[str, str]:
+        headers = {"Content-Type": "application/json"}
+        if self.token:
+            headers["Authorization"] = f"Bearer {self.token}"
+        return headers
+
+    def call(self, method: str, path: str, body: Any = None) -> Any:
+        """The answer's JSON; UserError with the API's own words for a refusal."""
+        data = json.dumps(body).encode() if body is not None else None
+        request = urllib.request.Request(self.url + path, data=data, method=method, headers=self._headers())
+        try:
+            with urllib.request.urlopen(request, timeout=TIMEOUT_S) as answer:
+                return json.loads(answer.read())
+        except urllib.error.HTTPError as error:
+            raise UserError(f"{error.code}: {_error_text(error.read())}") from None
+        except (urllib.error.URLError, OSError) as error:
+            reason = getattr(error, "reason", error)
+            raise UserError(f"cannot reach the control API at {self.url}: {reason}") from None
+        except ValueError:
+            raise UserError(f"{self.url}{path}: the answer is not JSON") from None
+
+    def state(self) -> dict[str, Any]:
+        return self.call("GET", "/api/state")
+
+    def set_region(self, name: str, density: float) -> dict[str, Any]:
+        return self.call("PATCH", f"/api/smoke/regions/{_quote(name)}", {"density": density})
+
+    def plume(self, name: str, **changes: Any) -> dict[str, Any]:
+        return self.call("PATCH", f"/api/smoke/plumes/{_quote(name)}", changes)
+
+    def pose(self, name: str, position: list[float], rotation_deg: list[float]) -> dict[str, Any]:
+        return self.call("PUT", f"/api/bodies/{_quote(name)}/pose", {"position": position, "rotation_deg": rotation_deg})
+
+    def clock(self, **changes: Any) -> dict[str, Any]:
+        return self.call("PATCH", "/api/clock", changes)
+
+    def watch(self, sensor: str, count: int | None = None, out=print) -> None:
+        """A line per scan of `sensor` from the WebSocket (`count` scans, or until interrupted)."""
+        asyncio.run(self._watch(sensor, count, out))
+
+    async def _watch(self, sensor: str, count: int | None, out) -> None:
+        import aiohttp
+
+        headers = {"Authorization": f"Bearer {self.token}"} if self.token else {}
+        ws_url = self.url.replace("http://", "ws://", 1) + "/api/ws"
+        try:
+            async with aiohttp.ClientSession(headers=headers) as session:
+                async with session.ws_connect(ws_url, max_msg_size=0) as socket:
+                    await socket.send_json({"subscribe": [sensor]})
+                    seen = 0
+                    async for message in socket:
+                        if message.type != aiohttp.WSMsgType.TEXT:
+                            break
+                        data = json.loads(message.data)
+                        if data.get("type") == "error":
+                            raise UserError(f"{data.get('status')}: {data.get('error')}")
+                        if data.get("type") == "scan":
+                            out(scan_line(data))
+                            seen += 1
+                            if count is not None and seen >= count:
+                                return
+        except aiohttp.WSServerHandshakeError as error:
+            raise UserError(f"{error.status}: {error.message}") from None
+        except (aiohttp.ClientError, OSError) as error:
+            raise UserError(f"cannot reach the control API at {self.url}: {error}") from None
+
+
+def scan_line(scan: dict[str, Any]) -> str:
+    """One scan in a line: time, sensor, how many beams measured, their nearest and the error count."""
+    ranges = [r for r in scan.get("ranges_m", []) if r is not None]
+    errors = len(scan.get("ranges_m", [])) - len(ranges)
+    nearest = f"{min(ranges):.3f} m" if ranges else "-"
+    ahead = _range_ahead(scan)
+    return (
+        f"{scan.get('time_s', math.nan):10.3f} s  {scan.get('sensor')}  {len(ranges)} ranges, "
+        f"{errors} errors, nearest {nearest}, ahead {ahead}"
+    )
+
+
+def _range_ahead(scan: dict[str, Any]) -> str:
+    angles = scan.get("angles_deg") or []
+    if not angles:
+        return "-"
+    index = min(range(len(angles)), key=lambda i: abs(angles[i]))
+    value, distance = scan["values"][index], scan["ranges_m"][index]
+    return f"{distance:.3f} m" if distance is not None else f"error {value}"
+
+
+def _quote(name: str) -> str:
+    return urllib.request.quote(name, safe="")
+
+
+def _error_text(raw: bytes) -> str:
+    try:
+        data = json.loads(raw)
+        return str(data.get("error", data))
+    except ValueError:
+        return raw.decode("utf-8", "replace")[:200]

@@ -1,0 +1,318 @@
+"""The control API's HTTP and WebSocket server (CONTROL_API.md), on the daemon's asyncio loop.
+
+Every answer is JSON. Client mistakes get a 4xx with `{"error", "key"}` in
+the scene loader's words (404 unknown name or path, 400 a refused value or
+body, 405 a method the path does not take, 409 a change the resource does
+not allow, 413 a body over 64 KiB, 401 a missing or wrong token). Bodies are
+read within 64 KiB, WebSocket messages too; each WebSocket client has a
+bounded queue of outgoing messages, and a client that stops reading is
+dropped when it fills, so it neither grows the daemon's memory nor delays
+its scans.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hmac
+import ipaddress
+import json
+import logging
+import struct
+from socket import SO_LINGER, SO_SNDBUF, SOL_SOCKET
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Any, Awaitable, Callable
+
+from aiohttp import WSMsgType, web
+
+from emulator.control.events import ControlError, event_json
+from emulator.control.scan_feed import ScanFeed
+from emulator.control.session import LiveSession
+from emulator.errors import UserError
+from emulator.scene.live import ClockChange, LiveEvent
+
+MAX_BODY_BYTES = 64 * 1024
+CLIENT_QUEUE_MESSAGES = 32  # outgoing messages a WebSocket client may fall behind by before it is dropped
+# The kernel's send buffer of a WebSocket client: what a client that stops reading can hold
+# besides its queue (loopback autotuning would let it grow to megabytes).
+CLIENT_SEND_BUFFER_BYTES = 256 * 1024
+DEFAULT_ADDRESS = "127.0.0.1:8765"
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ControlAddress:
+    host: str
+    port: int
+
+    @property
+    def url(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"http://{host}:{self.port}"
+
+    @property
+    def loopback(self) -> bool:
+        if self.host == "localhost":
+            return True
+        try:
+            return ipaddress.ip_address(self.host).is_loopback
+        except ValueError:
+            return False
+
+
+def parse_control_address(text: str) -> ControlAddress | None:
+    """`HOST:PORT` (IPv6 as `[::1]:PORT`; port 0 picks a free one) → address; `off` → None."""
+    if text == "off":
+        return None
+    host, sep, port = text.rpartition(":")
+    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise UserError(f"--control {text!r}: expected HOST:PORT (PORT 0..65535) or off")
+    return ControlAddress(host, int(port))
+
+
+def check_exposure(address: ControlAddress | None, token: str | None) -> None:
+    """A control API beyond loopback changes the world for anyone who reaches it: it needs a token."""
+    if address is not None and not address.loopback and not token:
+        raise UserError(
+            f"--control {address.host}:{address.port} is not a loopback address: give --control-token TOKEN "
+            "(clients then send Authorization: Bearer TOKEN)"
+        )
+
+
+class ControlServer:
+    """The API of one daemon's `LiveSession`, listening on `address`."""
+
+    def __init__(self, session: LiveSession, address: ControlAddress, token: str | None = None) -> None:
+        self.session = session
+        self.address = address
+        self._token = token
+        self._serializer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="control-json")
+        self._clock_changed = asyncio.Event()
+        self.feed = ScanFeed(session.daemon, self._serializer, self._clock_changed)
+        self._clients: set[_Client] = set()
+        self._state_pending = False
+        self._runner: web.AppRunner | None = None
+        self._unlisten = session.listen(self._changed)
+
+    async def start(self) -> ControlAddress:
+        """Listen; the address actually bound (a port 0 resolved). UserError if it cannot."""
+        app = web.Application(client_max_size=MAX_BODY_BYTES, middlewares=[self._errors_as_json, self._authorize])
+        app.router.add_get("/api/scene", self._scene)
+        app.router.add_get("/api/state", self._state)
+        app.router.add_get("/api/events", self._events)
+        app.router.add_put("/api/bodies/{name}/pose", self._change_handler("pose"))
+        app.router.add_patch("/api/smoke/regions/{name}", self._change_handler("region"))
+        app.router.add_patch("/api/smoke/plumes/{name}", self._change_handler("plume"))
+        app.router.add_patch("/api/clock", self._change_handler("clock"))
+        app.router.add_get("/api/sensors/{name}/scan", self._scan)
+        app.router.add_get("/api/ws", self._websocket)
+        self._runner = web.AppRunner(app, access_log=None, handle_signals=False)
+        await self._runner.setup()
+        site = web.TCPSite(self._runner, self.address.host, self.address.port, reuse_address=True)
+        try:
+            await site.start()
+        except OSError as error:
+            await self._runner.cleanup()
+            raise UserError(
+                f"--control {self.address.host}:{self.address.port}: cannot listen: {error.strerror or error} "
+                "(choose another with --control HOST:PORT, or --control off)"
+            ) from None
+        sockets = site._server.sockets if site._server is not None else []  # type: ignore[union-attr]
+        port = sockets[0].getsockname()[1] if sockets else self.address.port
+        self.address = ControlAddress(self.address.host, port)
+        return self.address
+
+    async def close(self) -> None:
+        self._unlisten()
+        self.feed.close()
+        for client in list(self._clients):
+            await client.close()
+        if self._runner is not None:
+            await self._runner.cleanup()
+        self._serializer.shutdown(wait=False, cancel_futures=True)
+
+    # ----------------------------------------------------------------------- middlewares
+
+    @web.middleware
+    async def _errors_as_json(self, request: web.Request, handler: Callable[[web.Request], Awaitable]) -> web.StreamResponse:
+        """aiohttp's own refusals (no route, wrong method, body too large) and ours, as JSON."""
+        try:
+            return await handler(request)
+        except ControlError as error:
+            return web.json_response(error.json(), status=error.status)
+        except web.HTTPException as error:
+            if error.status < 400:
+                raise
+            message = {404: "no such resource", 405: f"method {request.method} not allowed on {request.path}",
+                       413: f"body over {MAX_BODY_BYTES} bytes"}.get(error.status, error.reason)
+            headers = {"Allow": error.headers["Allow"]} if "Allow" in error.headers else None
+            return web.json_response({"error": message, "key": ""}, status=error.status, headers=headers)
+
+    @web.middleware
+    async def _authorize(self, request: web.Request, handler: Callable[[web.Request], Awaitable]) -> web.StreamResponse:
+        if self._token is not None:
+            given = request.headers.get("Authorization", "")
+            if not hmac.compare_digest(given.encode(), f"Bearer {self._token}".encode()):
+                raise ControlError(401, "missing or wrong token: send Authorization: Bearer TOKEN", "Authorization")
+        return await handler(request)
+
+    # ----------------------------------------------------------------------- resources
+
+    async def _scene(self, request: web.Request) -> web.Response:
+        return web.json_response(self.session.scene_json())
+
+    async def _state(self, request: web.Request) -> web.Response:
+        return web.json_response(self.session.state())
+
+    async def _events(self, request: web.Request) -> web.Response:
+        return web.json_response(self.session.event_log())
+
+    def _change_handler(self, op: str) -> Callable[[web.Request], Awaitable[web.Response]]:
+        async def handle(request: web.Request) -> web.Response:
+            body = await _json_body(request)
+            event = self.session.request(op, request.match_info.get("name"), body)
+            return web.json_response({"applied": event_json(event), "state": self.session.state()})
+
+        return handle
+
+    async def _scan(self, request: web.Request) -> web.Response:
+        name = request.match_info["name"]
+        if self.feed.spec(name) is None:
+            known = ", ".join(spec.name for spec in self.session.scene.sensors)
+            raise ControlError(404, f"no sensor named {json.dumps(name)} (known: {known})", f"sensors[{name}]")
+        return web.json_response(await self.feed.latest(name))
+
+    async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
+        socket = web.WebSocketResponse(max_msg_size=MAX_BODY_BYTES, heartbeat=None)
+        await socket.prepare(request)
+        connection = request.transport.get_extra_info("socket") if request.transport is not None else None
+        if connection is not None:
+            connection.setsockopt(SOL_SOCKET, SO_SNDBUF, CLIENT_SEND_BUFFER_BYTES)
+        client = _Client(socket, request.transport, self._drop)
+        self._clients.add(client)
+        client.offer(self._state_message())
+        try:
+            async for message in socket:
+                if message.type != WSMsgType.TEXT:
+                    client.offer(_error_message(ControlError(400, "expected a text message holding a JSON object")))
+                    continue
+                self._on_message(client, message.data)
+        finally:
+            self._drop(client)
+        return socket
+
+    def _on_message(self, client: _Client, text: str) -> None:
+        """A subscription or a change; a refused one is answered with an error message, the socket stays."""
+        try:
+            data = _parse_json(text)
+            if not isinstance(data, dict):
+                raise ControlError(400, "expected a JSON object with \"op\" or \"subscribe\"")
+            if "subscribe" in data:
+                self._subscribe(client, data)
+                return
+            body = dict(data)
+            op, name = body.pop("op", None), body.pop("name", None)
+            self.session.request(op, name, body)
+        except ControlError as error:
+            client.offer(_error_message(error))
+
+    def _subscribe(self, client: _Client, data: dict) -> None:
+        names = data["subscribe"]
+        if set(data) != {"subscribe"}:
+            raise ControlError(400, "subscribe: expected {\"subscribe\": [sensor names]} alone", "subscribe")
+        if not isinstance(names, list) or not all(isinstance(name, str) for name in names):
+            raise ControlError(400, "subscribe: expected a list of sensor names", "subscribe")
+        for name in names:
+            if self.feed.spec(name) is None:
+                known = ", ".join(spec.name for spec in self.session.scene.sensors)
+                raise ControlError(404, f"no sensor named {json.dumps(name)[:60]} (known: {known})", f"sensors[{name[:60]}]")
+        self.feed.unsubscribe(client.offer)
+        for name in names:
+            self.feed.subscribe(name, client.offer)
+
+    def _drop(self, client: _Client) -> None:
+        self.feed.unsubscribe(client.offer)
+        self._clients.discard(client)
+
+    # ----------------------------------------------------------------------- state on every change
+
+    def _changed(self, event: LiveEvent) -> None:
+        if isinstance(event, ClockChange):
+            self._clock_changed.set()
+        if not self._state_pending and self._clients:  # changes made in one loop turn share one message
+            self._state_pending = True
+            asyncio.get_running_loop().call_soon(self._send_state)
+
+    def _send_state(self) -> None:
+        self._state_pending = False
+        message = self._state_message()
+        for client in list(self._clients):
+            client.offer(message)
+
+    def _state_message(self) -> str:
+        return json.dumps({"type": "state", **self.session.state()})
+
+
+class _Client:
+    """One WebSocket client: outgoing messages through a bounded queue, written by its own task."""
+
+    def __init__(
+        self, socket: web.WebSocketResponse, transport: asyncio.BaseTransport | None, on_drop: Callable[[_Client], None]
+    ) -> None:
+        self._socket = socket
+        self._transport = transport
+        self._on_drop = on_drop
+        self._queue: asyncio.Queue[str] = asyncio.Queue(CLIENT_QUEUE_MESSAGES)
+        self._writer = asyncio.get_running_loop().create_task(self._write())
+        self.dropped = False
+
+    def offer(self, message: str) -> None:
+        if self.dropped:
+            return
+        try:
+            self._queue.put_nowait(message)
+        except asyncio.QueueFull:
+            log.info("control: a WebSocket client stopped reading; dropped")
+            self.dropped = True
+            self._on_drop(self)
+            self._writer.cancel()
+            if self._transport is not None:
+                connection = self._transport.get_extra_info("socket")
+                if connection is not None:  # reset, discarding what the kernel still holds for it
+                    connection.setsockopt(SOL_SOCKET, SO_LINGER, struct.pack("ii", 1, 0))
+                self._transport.abort()
+
+    async def _write(self) -> None:
+        try:
+            while True:
+                await self._socket.send_str(await self._queue.get())
+        except (ConnectionError, RuntimeError, asyncio.CancelledError):
+            pass
+
+    async def close(self) -> None:
+        self._writer.cancel()
+        await self._socket.close()
+
+
+async def _json_body(request: web.Request) -> Any:
+    raw = await request.read()  # at most client_max_size, else 413
+    if not raw.strip():
+        return {}
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ControlError(400, "body: not UTF-8 text") from None
+    return _parse_json(text)
+
+
+def _parse_json(text: str) -> Any:
+    try:
+        return json.loads(text)
+    except (ValueError, RecursionError):
+        raise ControlError(400, "body: not valid JSON") from None
+
+
+def _error_message(error: ControlError) -> str:
+    return json.dumps({"type": "error", "status": error.status, **error.json()})

@@ -1,0 +1,126 @@
+"""`LiveSession`: the one place live changes enter a running daemon, and its event log.
+
+Every front end (HTTP, WebSocket, `serve --events-in`) hands its changes to
+`LiveSession.request` or `apply`; the session stamps them with the simulated
+instant they take effect, applies them to the daemon (world, scan caches,
+clock), appends them to the event log (and `--events FILE`), and tells its
+listeners (the WebSocket clients' state messages).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from emulator.control.events import ControlError, EventWriter, change, change_instant, event_json
+from emulator.daemon.service import Daemon
+from emulator.scene.live import LiveEvent
+from emulator.scene.model import Pose, Scene
+
+Listener = Callable[[LiveEvent], None]
+
+
+class LiveSession:
+    """Live changes to `daemon`, logged; `writer` (serve --events) gets each one as it is applied."""
+
+    def __init__(self, daemon: Daemon, writer: EventWriter | None = None) -> None:
+        self.daemon = daemon
+        self.scene: Scene = daemon.scene
+        self.events: list[LiveEvent] = []
+        self._writer = writer
+        self._listeners: list[Listener] = []
+
+    def listen(self, listener: Listener) -> Callable[[], None]:
+        """Call `listener(event)` after each applied change; returns what stops it."""
+        self._listeners.append(listener)
+        return lambda: self._listeners.remove(listener) if listener in self._listeners else None
+
+    def request(self, op: Any, name: Any, body: Any) -> LiveEvent:
+        """A change asked for now: checked (ControlError), stamped with the next µs tick, applied."""
+        if self.daemon.live is None and op != "clock":
+            raise ControlError(409, "this daemon serves recorded scans: its world cannot change", "op")
+        event = change(self.scene, op, name, body, change_instant(self.daemon.clock.now()))
+        self.apply(event)
+        return event
+
+    def apply(self, event: LiveEvent) -> None:
+        """Apply an event (checked already, e.g. read from a log) and record it; ControlError 409
+        for a live pose stamped before the body's last one (a log replayed ahead of now)."""
+        try:
+            self.daemon.apply(event)
+        except ValueError as error:
+            raise ControlError(409, str(error), f"bodies[{event.name}]") from None
+        self.events.append(event)
+        if self._writer is not None:
+            self._writer.write(event)
+        for listener in list(self._listeners):
+            listener(event)
+
+    def close(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+
+    # ----------------------------------------------------------------------- what the API shows
+
+    def event_log(self) -> list[dict[str, Any]]:
+        return [event_json(event) for event in self.events]
+
+    def state(self) -> dict[str, Any]:
+        """`GET /api/state`: the clock, and what holds now of every live quantity."""
+        clock = self.daemon.clock
+        now = clock.now()
+        live = self.daemon.live
+        state: dict[str, Any] = {
+            "time_s": round(now, 6),
+            "speed": clock.speed,
+            "paused": bool(getattr(clock, "paused", False)),
+            "bodies": {},
+            "regions": {},
+            "plumes": {},
+            "sensors": {},
+        }
+        if live is not None:
+            for body in self.scene.bodies:
+                state["bodies"][body.name] = pose_json(live.body_pose(body.name, now))
+            for index, region in enumerate(self.scene.regions):
+                state["regions"][region.name] = {"density": live.region_density(index, now)}
+            for plume in self.scene.plumes:
+                state["plumes"][plume.name] = live.plume_state(plume.name, now)
+        for spec in self.scene.sensors:
+            state["sensors"][spec.name] = {"pose": pose_json(spec.pose), "clients": self.daemon.clients(spec.name)}
+        return state
+
+    def scene_json(self) -> dict[str, Any]:
+        """`GET /api/scene`: the loaded scene as plain JSON."""
+        return plain(self.scene)
+
+
+def pose_json(pose: Pose) -> dict[str, list[float]]:
+    return {"position": list(pose.position), "rotation_deg": list(pose.rotation_deg)}
+
+
+def plain(value: Any) -> Any:
+    """A scene's dataclasses as JSON-ready values; a shape says its kind (`{"kind": "box", ...}`)."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        fields = {field.name: plain(getattr(value, field.name)) for field in dataclasses.fields(value)}
+        if type(value).__name__ in ("Box", "Sphere", "Cylinder", "MeshFile"):
+            return {"kind": type(value).__name__.lower().replace("meshfile", "mesh"), **fields}
+        return fields
+    if isinstance(value, Mapping):
+        return {str(key): plain(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [plain(item) for item in value]
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (np.integer, np.floating)):
+        return value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+

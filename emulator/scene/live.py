@@ -1,0 +1,260 @@
+"""Live changes to a scene, and the scene's state at any instant under them.
+
+While `serve` runs, the control API changes the world: a smoke region's
+density, a plume's emission (on/off, rate, wind), a live body's pose, the
+clock. Each change is an event stamped with the simulated instant it takes
+effect. The world at time t stays a pure function of (scene, seed, events,
+t): an event changes nothing before its instant, so a scan at t depends only
+on the events stamped at or before t, and caching, batching and prefetching
+stay correct as long as scans at or after a new event's instant are
+recomputed (the daemon's scan caches drop them).
+
+`LiveState` holds the events applied so far, per region and plume (a live
+body's poses go to its `BodyPoses`, scene/bodies.py), and answers "what holds
+at t". Events of one item normally arrive in time order; a density or plume
+change stamped before that item's later changes (a log replayed ahead, then a
+change made by hand) replaces them, as a density change drops the scene's
+keyframes after it; live poses only move forward.
+
+`event_record` / `event_from_record` turn events into plain dicts and back,
+for the event log and for worker processes (daemon/workers.py), which apply
+the same events to their own worlds.
+"""
+
+from __future__ import annotations
+
+import bisect
+import threading
+from dataclasses import dataclass, field
+from typing import Union
+
+from typing import Any
+
+from emulator.scene.bodies import BodyPoses
+from emulator.scene.model import Plume, Pose, Scene, Vec3
+from emulator.scene.plumes import EmissionSegment, scene_emission
+
+
+@dataclass(frozen=True)
+class RegionChange:
+    """From `time_s` on, smoke region `name` holds `density` (its keyframes after that are dropped)."""
+
+    time_s: float
+    name: str
+    density: float
+
+    op = "region"
+
+
+@dataclass(frozen=True)
+class PlumeChange:
+    """From `time_s` on, plume `name`'s particles are born with what is given (None: unchanged).
+
+    `emitting` overrides the scene's start/stop schedule from then on; particles
+    already alive keep the rate and wind of their birth.
+    """
+
+    time_s: float
+    name: str
+    emitting: bool | None = None
+    rate: float | None = None
+    wind: Vec3 | None = None
+
+    op = "plume"
+
+
+@dataclass(frozen=True)
+class PoseChange:
+    """From `time_s` on, live body `name` stands at `pose` (until its next pose)."""
+
+    time_s: float
+    name: str
+    pose: Pose
+
+    op = "pose"
+
+
+@dataclass(frozen=True)
+class ClockChange:
+    """At `time_s` the clock's speed and/or pause changed; scans do not depend on it (logged for the record)."""
+
+    time_s: float
+    speed: float | None = None
+    paused: bool | None = None
+
+    op = "clock"
+    name = ""
+
+
+LiveEvent = Union[RegionChange, PlumeChange, PoseChange, ClockChange]
+WorldEvent = Union[RegionChange, PlumeChange, PoseChange]
+
+
+@dataclass
+class _Track:
+    """One item's events, ascending in time: parallel lists so `bisect` finds the one holding at t."""
+
+    times: list[float] = field(default_factory=list)
+    events: list = field(default_factory=list)
+
+    def add(self, time_s: float, event: object) -> None:
+        """Append, dropping this item's events stamped after `time_s` (the new one replaces them)."""
+        keep = bisect.bisect_right(self.times, time_s)
+        if keep < len(self.times):
+            del self.times[keep:], self.events[keep:]
+        self.events.append(event)
+        self.times.append(time_s)
+
+    def holding(self, time_s: float):
+        """The last event stamped at or before `time_s`, or None."""
+        position = bisect.bisect_right(self.times, time_s)
+        return self.events[position - 1] if position else None
+
+
+class LiveState:
+    """The live events applied to one scene, and what they make of it at any instant.
+
+    `apply` runs on the daemon's loop thread while scans read on the scan
+    thread: a lock keeps each read consistent. `generation` counts applied
+    world events, so a cache of anything computed from this state can tell
+    when it is stale.
+    """
+
+    def __init__(self, scene: Scene, bodies: BodyPoses | None = None) -> None:
+        self.scene = scene
+        self.bodies = bodies if bodies is not None else BodyPoses(scene.bodies)
+        self.generation = 0
+        self._lock = threading.Lock()
+        self._regions = {region.name: _Track() for region in scene.regions}
+        self._plumes = {plume.name: _Track() for plume in scene.plumes}
+        self._segments: dict[str, tuple[EmissionSegment, ...] | None] = {plume.name: None for plume in scene.plumes}
+
+    def apply(self, event: WorldEvent) -> None:
+        """Take `event` into account from its instant on (validated by the caller: names exist).
+        ValueError for a pose stamped before the body's last one."""
+        if isinstance(event, PoseChange):
+            self.bodies.add_live_pose(event.name, event.time_s, event.pose)
+            with self._lock:
+                self.generation += 1
+            return
+        with self._lock:
+            if isinstance(event, RegionChange):
+                self._regions[event.name].add(event.time_s, event)
+            elif isinstance(event, PlumeChange):
+                track = self._plumes[event.name]
+                track.add(event.time_s, event)
+                plume = next(plume for plume in self.scene.plumes if plume.name == event.name)
+                self._segments[event.name] = emission_segments(plume, track.events)
+            else:
+                raise TypeError(f"not a world event: {event!r}")
+            self.generation += 1
+
+    def region_density(self, index: int, time_s: float) -> float:
+        """Region `index`'s density at `time_s`: its last live change, else the scene's keyframes."""
+        region = self.scene.regions[index]
+        with self._lock:
+            change = self._regions[region.name].holding(time_s)
+        return change.density if change is not None else float(region.density.at(time_s))
+
+    def plume_segments(self, index: int) -> tuple[EmissionSegment, ...] | None:
+        """Plume `index`'s emission segments, or None while no live change touched it (the scene's emission)."""
+        with self._lock:
+            return self._segments[self.scene.plumes[index].name]
+
+    def plume_state(self, name: str, time_s: float) -> dict:
+        """What plume `name` emits at `time_s`: {"emitting", "rate", "wind"} (for the control API's state)."""
+        plume = next(plume for plume in self.scene.plumes if plume.name == name)
+        with self._lock:
+            segments = self._segments[name] or (scene_emission(plume),)
+            changes = [event for event in self._plumes[name].events if event.time_s <= time_s]
+        rate, wind = plume.rate, plume.wind
+        for change in changes:
+            rate = change.rate if change.rate is not None else rate
+            wind = change.wind if change.wind is not None else wind
+        emitting = any(segment.first_birth <= time_s < segment.end for segment in segments)
+        return {"emitting": emitting, "rate": rate, "wind": list(wind)}
+
+    def body_pose(self, name: str, time_s: float) -> Pose:
+        """Body `name`'s pose at `time_s` (its trajectory, or a live body's last pose)."""
+        return self.bodies.frames(name, [time_s]).at(0)
+
+
+def emission_segments(plume: Plume, changes: list[PlumeChange]) -> tuple[EmissionSegment, ...]:
+    """The plume's emission split at each change, each part with the rate and wind then in force.
+
+    Before the first change the scene's schedule holds (births from `start`,
+    before `stop`); a change with `emitting` set replaces that schedule from
+    its instant on. A part that starts while the plume was emitting continues
+    its cadence (the next birth one new interval after the last one, not
+    before the change), so changing only the wind adds no extra particle.
+    """
+    segments: list[EmissionSegment] = []
+    emitting: bool | None = None  # None: the scene's start/stop schedule
+    rate, wind = plume.rate, plume.wind
+    boundaries = [change.time_s for change in changes[1:]] + [float("inf")]
+    begin = float("-inf")
+    next_index = 0
+    last_birth: float | None = None
+    for change, end in zip([None, *changes], [changes[0].time_s if changes else float("inf"), *boundaries]):
+        if change is not None:
+            begin = change.time_s
+            emitting = change.emitting if change.emitting is not None else emitting
+            rate = change.rate if change.rate is not None else rate
+            wind = change.wind if change.wind is not None else wind
+        window_begin, window_end = (max(begin, plume.start), min(end, plume.stop)) if emitting is None else (begin, end)
+        if emitting is False or not window_begin < window_end:
+            last_birth = None
+            continue
+        if change is None:
+            first_birth = plume.start  # the scene's own cadence: particle indices as without changes
+        elif last_birth is not None and begin == window_begin:
+            first_birth = max(window_begin, last_birth + 1.0 / rate)
+        else:
+            first_birth = window_begin
+        segment = EmissionSegment(first_birth, window_end, rate, wind, next_index)
+        count = segment.births_before(window_end) if window_end != float("inf") else 0
+        if count:
+            next_index += count
+            last_birth = first_birth + (count - 1) / rate
+            segments.append(segment)
+        elif window_end == float("inf"):
+            segments.append(segment)
+        else:
+            last_birth = None
+    return tuple(segments)
+
+
+def event_record(event: LiveEvent) -> dict[str, Any]:
+    """A plain dict of the event: {"t", "op", "name", ...its values} (the event log's line)."""
+    record: dict[str, Any] = {"t": event.time_s, "op": event.op}
+    if isinstance(event, ClockChange):
+        record.update({key: value for key, value in (("speed", event.speed), ("paused", event.paused)) if value is not None})
+        return record
+    record["name"] = event.name
+    if isinstance(event, RegionChange):
+        record["density"] = event.density
+    elif isinstance(event, PlumeChange):
+        for key in ("emitting", "rate", "wind"):
+            value = getattr(event, key)
+            if value is not None:
+                record[key] = list(value) if key == "wind" else value
+    else:
+        record["position"] = list(event.pose.position)
+        record["rotation_deg"] = list(event.pose.rotation_deg)
+    return record
+
+
+def event_from_record(record: dict[str, Any]) -> LiveEvent:
+    """The event of a record made by `event_record` (trusted: checked where it came from)."""
+    time_s, op = float(record["t"]), record["op"]
+    if op == "clock":
+        return ClockChange(time_s, record.get("speed"), record.get("paused"))
+    if op == "region":
+        return RegionChange(time_s, record["name"], float(record["density"]))
+    if op == "plume":
+        wind = record.get("wind")
+        return PlumeChange(time_s, record["name"], record.get("emitting"), record.get("rate"),
+                           tuple(wind) if wind is not None else None)
+    if op == "pose":
+        return PoseChange(time_s, record["name"], Pose(tuple(record["position"]), tuple(record["rotation_deg"])))
+    raise ValueError(f"unknown live event op {op!r}")

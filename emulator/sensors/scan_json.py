@@ -1,0 +1,41 @@
+"""A scan as the JSON of `lrf-emulator scan` (CLI.md), shared by the command and the control API."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from emulator.scene.bodies import matrix_euler_deg, matrix_quaternion
+from emulator.sensors import Scan, Sensor, beam_times_s, ranges_m
+
+ANGLE_DECIMALS = 9  # the devices' angles are exact in far fewer digits; drop float noise
+TIME_DECIMALS = 9  # beam instants: nanoseconds, far below the µs grid the world is evaluated on
+POSE_DECIMALS = 12
+
+
+def pose_json(sensor: Sensor, time_s: float) -> dict:
+    """The sensor's world pose at `time_s`: position (m), roll/pitch/yaw (degrees), quaternion (x, y, z, w)."""
+    position, rotation = sensor.mount.pose_at(time_s)
+    return {
+        "position": [round(float(v), POSE_DECIMALS) for v in position],
+        "rotation_deg": [round(v, POSE_DECIMALS) for v in matrix_euler_deg(rotation)],
+        "quaternion": [round(float(v), POSE_DECIMALS) for v in matrix_quaternion(rotation)],
+    }
+
+
+def scan_json(scan: Scan, sensor: Sensor | None = None) -> dict:
+    """The scan as JSON; with the `sensor` that took it, also its `pose` and the beams' `times_s`."""
+    ranges = ranges_m(scan)
+    extra = {} if sensor is None else {
+        "pose": pose_json(sensor, scan.time_s),
+        "times_s": np.round(beam_times_s(scan), TIME_DECIMALS).tolist(),
+    }
+    return {
+        "sensor": scan.sensor,
+        "model": scan.model,
+        "time_s": scan.time_s,
+        "unit": scan.unit,
+        "angles_deg": np.round(np.degrees(scan.angles_rad), ANGLE_DECIMALS).tolist(),
+        "values": [int(v) for v in scan.values],
+        "ranges_m": [None if np.isnan(r) else float(r) for r in ranges],
+        **extra,
+    }

@@ -1,0 +1,309 @@
+"""The control API against the real `serve` process (CONTROL_API.md).
+
+Answers are JSON with the scene loader's words; nothing a client sends gets a
+500; a plume switched on shows up in the LMS200's scans; the clock pauses;
+the token rule holds; a WebSocket client that stops reading is dropped while
+others keep their scans; and a live session replayed from its event log
+gives the same scans.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import socket
+import subprocess
+import time
+from pathlib import Path
+
+from urllib.parse import quote
+
+import aiohttp
+import numpy as np
+import pytest
+from control_support import ENDPOINTS, call, write_live_body_room, write_live_room
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from emulator.bench.serve_process import ServeProcess, serve_command
+from emulator.commands.options import world_from_args
+from emulator.scene import load_scene
+from emulator.sensors import create_sensor
+
+
+@pytest.fixture
+def room(tmp_path: Path) -> Path:
+    return write_live_room(tmp_path)
+
+
+@pytest.fixture
+def daemon(room: Path):
+    with ServeProcess(room, ENDPOINTS) as process:
+        yield process
+        assert process.process.poll() is None, process.stderr
+
+
+def test_errors_are_json_in_the_scene_loaders_words(daemon: ServeProcess) -> None:
+    url = daemon.control_url
+    assert call(url, "PATCH", "/api/smoke/regions/room", {"density": -1}) == (
+        400, {"error": "smoke.regions[room].density: must be >= 0, got -1", "key": "smoke.regions[room].density"}
+    )
+    status, answer = call(url, "PATCH", "/api/smoke/regions/nowhere", {"density": 1})
+    assert status == 404 and answer["key"] == "smoke.regions[nowhere]" and "known: room" in answer["error"]
+    status, answer = call(url, "PATCH", "/api/smoke/plumes/fire", {"rate": 0})
+    assert (status, answer["error"]) == (400, "smoke.plumes[fire].rate: must be > 0, got 0")
+    status, answer = call(url, "PATCH", "/api/smoke/plumes/fire", {"colour": "red"})
+    assert status == 400 and answer["error"].startswith("smoke.plumes[fire].colour: unknown key")
+    assert call(url, "PATCH", "/api/smoke/regions/room", raw=b"{nope")[0] == 400
+    assert call(url, "PATCH", "/api/smoke/regions/room", raw=b"[" * 5000 + b"]" * 5000)[0] == 400
+    assert call(url, "PATCH", "/api/smoke/regions/room", {"density": 10**400})[0] == 400
+    assert call(url, "PATCH", "/api/smoke/regions/room", raw=b" " * (65 * 1024))[0] == 413
+    status, answer = call(url, "PUT", "/api/bodies/robot/pose", {"position": [0, 0, 0]})
+    assert status == 404 and "no body named" in answer["error"]
+    assert call(url, "DELETE", "/api/state")[0] == 405
+    assert call(url, "GET", "/api/nothing/here")[0] == 404
+    assert call(url, "GET", "/api/sensors/none/scan")[0] == 404
+
+
+def test_a_plume_switched_on_shows_up_as_lms200_obstacles(daemon: ServeProcess) -> None:
+    url = daemon.control_url
+    status, before = call(url, "GET", "/api/sensors/lms/scan")
+    assert status == 200 and before["model"] == "lms200" and len(before["values"]) == 361
+    ahead = np.abs(np.asarray(before["angles_deg"])) <= 3
+    assert np.all(np.asarray(before["values"])[ahead] > 2800)  # the wall, 2.9 m away
+    status, answer = call(url, "PATCH", "/api/smoke/plumes/fire", {"emitting": True})
+    assert status == 200 and answer["applied"]["emitting"] is True
+    assert answer["state"]["plumes"]["fire"]["emitting"] is True
+    time.sleep(1.5)  # the particles rise through the scan plane
+    status, after = call(url, "GET", "/api/sensors/lms/scan")
+    assert after["time_s"] > answer["applied"]["t"]
+    values = np.asarray(after["values"])[ahead]
+    assert np.any((values > 1000) & (values < 2000)), values  # particles 1.5 m ahead, not the wall
+    status, events = call(url, "GET", "/api/events")
+    assert events == [answer["applied"]]
+
+
+def test_the_clock_pauses_and_changes_speed_continuously(daemon: ServeProcess) -> None:
+    url = daemon.control_url
+    status, answer = call(url, "PATCH", "/api/clock", {"paused": True})
+    assert status == 200 and answer["state"]["paused"] is True
+    frozen = answer["state"]["time_s"]
+    time.sleep(0.3)
+    assert call(url, "GET", "/api/state")[1]["time_s"] == frozen
+    status, answer = call(url, "PATCH", "/api/clock", {"paused": False, "speed": 0.5})
+    assert answer["state"]["speed"] == 0.5 and abs(answer["state"]["time_s"] - frozen) < 0.05
+    assert call(url, "PATCH", "/api/clock", {"speed": 0})[1]["error"] == "clock.speed: must be > 0, got 0"
+
+
+def test_a_slow_websocket_client_is_dropped_and_others_keep_their_scans(daemon: ServeProcess) -> None:
+    url = daemon.control_url
+    port = int(url.rsplit(":", 1)[1])
+    stuck = socket.create_connection(("127.0.0.1", port))
+    stuck.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    stuck.sendall(
+        b"GET /api/ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+        b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n"
+    )
+    subscribe = json.dumps({"subscribe": ["lms", "urg"]}).encode()
+    mask = b"\x00\x00\x00\x00"
+    stuck.sendall(bytes([0x81, 0x80 | len(subscribe)]) + mask + subscribe)  # a masked text frame
+
+    async def watch() -> list[float]:
+        async with aiohttp.ClientSession() as session:
+            async with session.ws_connect(url + "/api/ws") as ws:
+                await ws.send_json({"subscribe": ["urg"]})
+                times = []
+                while len(times) < 40:
+                    message = json.loads((await ws.receive(timeout=10)).data)
+                    if message["type"] == "scan":
+                        times.append(message["time_s"])
+                return times
+
+    times = asyncio.run(watch())  # 4 s: the stuck client fills its queue meanwhile
+    assert np.allclose(np.diff(times), 0.1), times
+    time.sleep(2.0)
+    ended, received = False, 0
+    stuck.settimeout(1.0)
+    deadline = time.monotonic() + 10.0
+    try:
+        while time.monotonic() < deadline:
+            try:
+                chunk = stuck.recv(1 << 16)
+            except socket.timeout:
+                continue
+            if not chunk:
+                ended = True
+                break
+            received += len(chunk)
+    except ConnectionResetError:
+        ended = True
+    stuck.close()
+    assert ended, f"the daemon kept a client that stopped reading ({received} bytes read afterwards)"
+    assert received < 20_000_000
+    assert call(url, "GET", "/api/state")[0] == 200
+
+
+def test_the_token_rule(room: Path) -> None:
+    result = subprocess.run(
+        [*serve_command(), "serve", str(room), "--control", "0.0.0.0:0"], capture_output=True, text=True, timeout=60
+    )
+    assert result.returncode == 2
+    assert result.stderr.count("\n") == 1 and "--control-token" in result.stderr
+    with ServeProcess(room, ENDPOINTS[:1], extra_args=("--control", "127.0.0.1:0", "--control-token", "s3cret")) as d:
+        assert call(d.control_url, "GET", "/api/state")[0] == 401
+        assert call(d.control_url, "GET", "/api/state", headers={"Authorization": "Bearer wrong"})[0] == 401
+        assert call(d.control_url, "GET", "/api/state", headers={"Authorization": "Bearer s3cret"})[0] == 200
+
+
+def test_a_live_session_and_its_replay_give_identical_scans(room: Path, tmp_path: Path) -> None:
+    log = tmp_path / "events.jsonl"
+    scans: list[dict] = []
+    with ServeProcess(room, ENDPOINTS, extra_args=("--control", "127.0.0.1:0", "--events", str(log))) as daemon:
+        url = daemon.control_url
+
+        async def session() -> None:
+            async with aiohttp.ClientSession() as http:
+                async with http.ws_connect(url + "/api/ws") as ws:
+                    await ws.send_json({"subscribe": ["urg"]})
+                    changes = [
+                        {"op": "region", "name": "room", "density": 0.003},
+                        {"op": "plume", "name": "fire", "emitting": True, "rate": 25},
+                        {"op": "plume", "name": "fire", "wind": [0.0, 0.5, 0.0]},
+                        {"op": "region", "name": "room", "density": 0.0},
+                    ]
+                    while len(scans) < 16:
+                        message = json.loads((await ws.receive(timeout=10)).data)
+                        if message["type"] == "scan":
+                            scans.append(message)
+                            if len(scans) % 3 == 0 and changes:
+                                await ws.send_json(changes.pop(0))
+                        assert message["type"] != "error", message
+
+        asyncio.run(session())
+    events = [json.loads(line) for line in log.read_text().splitlines()]
+    assert [event["op"] for event in events] == ["region", "plume", "plume", "region"]
+    scene = load_scene(room)
+
+    class Args:
+        events_in = log
+
+    urg = create_sensor(scene, "urg", world_from_args(scene, Args()))
+    changed = 0
+    plain = create_sensor(scene, "urg")
+    for scan in scans:
+        replayed = urg.scan(scan["time_s"]).values
+        np.testing.assert_array_equal(replayed, scan["values"], err_msg=f"at {scan['time_s']}")
+        changed += not np.array_equal(replayed, plain.scan(scan["time_s"]).values)
+    assert changed >= 6, "the changes should have shown in the scans"
+    result = subprocess.run(
+        [*serve_command(), "scan", str(room), "--sensor", "urg", "--time", repr(scans[-1]["time_s"]),
+         "--events-in", str(log)], capture_output=True, text=True, timeout=60,
+    )
+    assert json.loads(result.stdout)["values"] == scans[-1]["values"]
+    with ServeProcess(room, ENDPOINTS[:1], extra_args=("--control", "127.0.0.1:0", "--events-in", str(log))) as again:
+        assert call(again.control_url, "GET", "/api/events")[1] == events
+
+
+METHODS = st.sampled_from(["GET", "PUT", "PATCH", "POST", "DELETE", "HEAD", "OPTIONS", "TRACE", "FOO"])
+PATHS = st.one_of(
+    st.sampled_from(
+        ["/api/scene", "/api/state", "/api/events", "/api/clock", "/api/ws", "/api/smoke/regions/room",
+         "/api/smoke/plumes/fire", "/api/bodies/robot/pose", "/api/sensors/urg/scan", "/api/sensors/lms/scan", "/"]
+    ),
+    st.builds(
+        lambda kind, name: f"/api/{kind}/{quote(name, safe='%')}",
+        st.sampled_from(["smoke/regions", "smoke/plumes", "bodies", "sensors"]),
+        st.text("abcdefgh%2F._-~ü", min_size=0, max_size=12),
+    ),
+)
+JSON = st.recursive(
+    st.none() | st.booleans() | st.floats(allow_nan=True) | st.integers() | st.text(max_size=8),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(
+        st.sampled_from(["density", "emitting", "rate", "wind", "speed", "paused", "position", "yaw_deg", "x"]), inner,
+        max_size=4,
+    ),
+    max_leaves=12,
+)
+
+
+@pytest.fixture(scope="module")
+def shared_daemon(tmp_path_factory):
+    room = write_live_room(tmp_path_factory.mktemp("fuzz"))
+    with ServeProcess(room, ENDPOINTS) as process:
+        yield process
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(method=METHODS, path=PATHS, body=JSON)
+def test_whatever_a_client_sends_gets_a_2xx_or_4xx_and_the_daemon_serves_on(shared_daemon, method, path, body) -> None:
+    if path.endswith("/api/clock") and method == "PATCH":
+        body = {key: value for key, value in body.items() if key != "paused"} if isinstance(body, dict) else body
+    status, answer = call(shared_daemon.control_url, method, path, raw=json.dumps(body).encode(), as_json=method != "FOO")
+    assert 200 <= status < 500, (status, answer)
+    if method not in ("HEAD", "FOO"):  # aiohttp's HTTP parser itself refuses an unknown method (400, text)
+        assert answer is not None
+    assert shared_daemon.process.poll() is None
+    if status >= 400 and method not in ("HEAD", "FOO"):
+        assert set(answer) >= {"error"}
+
+
+def _front_mm(scan: dict) -> int:
+    """The URG's value straight ahead (step 384)."""
+    return scan["values"][384]
+
+
+def test_a_live_body_moved_by_put_and_by_a_100_hz_websocket_stream_moves_the_scan(tmp_path: Path) -> None:
+    room = write_live_body_room(tmp_path)
+    log = tmp_path / "poses.jsonl"
+    with ServeProcess(room, ENDPOINTS[:1], extra_args=("--control", "127.0.0.1:0", "--events", str(log))) as daemon:
+        url = daemon.control_url
+        assert _front_mm(call(url, "GET", "/api/sensors/urg/scan")[1]) == 2900  # the wall: the crate is aside
+        status, answer = call(url, "PUT", "/api/bodies/robot/pose", {"position": [1.2, 0.0, 0.0], "yaw_deg": 0})
+        assert status == 200 and answer["state"]["bodies"]["robot"]["position"] == [1.2, 0.0, 0.0]
+        time.sleep(0.3)
+        assert _front_mm(call(url, "GET", "/api/sensors/urg/scan")[1]) == 1000  # the crate's near face
+        status, answer = call(url, "PUT", "/api/bodies/robot/pose", {"position": [1, 2, 0], "rotation_deg": [0, 0]})
+        assert status == 400 and answer["key"] == "bodies[robot].rotation_deg"
+        scans: list[dict] = []
+
+        async def drive() -> int:
+            """Poses at 100 Hz for 1.5 s on one connection: the crate backs off from 1.2 m to 2.4 m."""
+            async with aiohttp.ClientSession() as http:
+                async with http.ws_connect(url + "/api/ws") as ws:
+                    await ws.send_json({"subscribe": ["urg"]})
+                    sent = 0
+                    start = time.monotonic()
+                    while sent < 150:
+                        x = 1.2 + 1.2 * sent / 149
+                        await ws.send_json({"op": "pose", "name": "robot", "position": [x, 0.0, 0.0], "yaw_deg": 0})
+                        sent += 1
+                        while True:  # read what came meanwhile, without waiting past the next pose's time
+                            wait = start + sent / 100 - time.monotonic()
+                            try:
+                                message = await ws.receive(timeout=max(wait, 0.0005))
+                            except asyncio.TimeoutError:
+                                break
+                            data = json.loads(message.data)
+                            assert data["type"] != "error", data
+                            if data["type"] == "scan":
+                                scans.append(data)
+                    while len(scans) < 25:
+                        data = json.loads((await ws.receive(timeout=5)).data)
+                        if data["type"] == "scan":
+                            scans.append(data)
+                    return sent
+
+        assert asyncio.run(drive()) == 150
+        assert _front_mm(scans[-1]) == 2200  # the crate's near face at its last pose, 2.4 - 0.2
+    events = [json.loads(line) for line in log.read_text().splitlines()]
+    assert len(events) == 151 and all(event["op"] == "pose" for event in events)
+    fronts = [_front_mm(scan) for scan in scans]
+    assert len(set(fronts)) >= 5, fronts  # the scans followed the crate
+    scene = load_scene(room)
+
+    class Args:
+        events_in = log
+
+    urg = create_sensor(scene, "urg", world_from_args(scene, Args()))
+    for scan in scans:  # the replay sees the crate wherever the live session did, beam for beam
+        np.testing.assert_array_equal(urg.scan(scan["time_s"]).values, scan["values"], err_msg=f"at {scan['time_s']}")
