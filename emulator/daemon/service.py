@@ -47,7 +47,7 @@ from emulator.sensors import create_sensor
 from emulator.sensors.scan import Scan
 from emulator.transport.pty import PtyEndpoint
 from emulator.transport.tcp import TcpEndpoint
-from emulator.transport.timer import PreciseTimer
+from emulator.transport.timer import PreciseTimer, shared_timer
 from protocols.device import Device, Output
 from protocols.lms2xx import Lms200Device
 from protocols.scip import UrgDevice
@@ -292,7 +292,7 @@ class Daemon:
         If one cannot be bound, those already bound are closed and a UserError
         names it and where it was asked for."""
         factory, executor = self._scan_sources()
-        self._timer = PreciseTimer(loop)
+        self._timer = shared_timer(loop)
         readies = []
         for ordinal, (spec, addresses) in enumerate(self._plan):
             scans = self.scan_caches[spec.name] = ScanCache(factory(spec), executor, phase=ordinal)

@@ -13,6 +13,7 @@ from typing import Callable
 
 from emulator.transport import Session
 from emulator.transport.outbox import DEFAULT_LIMIT_BYTES, Outbox
+from emulator.transport.timer import TimerHandle, shared_timer
 from protocols.device import Output
 
 READ_SIZE = 65536
@@ -60,7 +61,7 @@ class Link:
         self._session = session
         self._on_lost = on_lost
         self._accepts_input = accepts_input
-        self._pace_timer: asyncio.TimerHandle | None = None
+        self._pace_timer: TimerHandle | None = None
         self._waiting_writable = False
         self._open = True
         self._unfed = memoryview(b"")  # read but not yet given to the session
@@ -154,7 +155,9 @@ class Link:
             data, wake_at = self.outbox.chunk(now)
             if not data:
                 if wake_at is not None:
-                    self._pace_timer = self._loop.call_at(wake_at, self._on_pace_timer)
+                    # the precise timer: asyncio's fires 0.2-3.5 ms late, which moved the end of
+                    # each paced telegram by as much (LMS200 period deviation p99 ≈ 3.6 ms)
+                    self._pace_timer = shared_timer(self._loop).call_at(wake_at, self._on_pace_timer)
                 return
             try:
                 written = self._write(data)

@@ -21,6 +21,7 @@ import heapq
 import itertools
 import os
 import time
+import weakref
 from typing import Any, Callable
 
 _CLOCK_MONOTONIC = 1
@@ -80,6 +81,10 @@ class PreciseTimer:
         self._fd = _check(_libc.timerfd_create(_CLOCK_MONOTONIC, _TFD_NONBLOCK | _TFD_CLOEXEC))
         loop.add_reader(self._fd, self._on_expiry)
 
+    @property
+    def closed(self) -> bool:
+        return self._fd < 0
+
     def call_at(self, when: float, callback: Callable[..., Any], *args: Any) -> TimerHandle:
         handle = TimerHandle(when, callback, args)
         heapq.heappush(self._heap, (when, next(self._order), handle))
@@ -97,6 +102,8 @@ class PreciseTimer:
         self._loop.remove_reader(self._fd)
         os.close(self._fd)
         self._fd = -1
+        if _SHARED.get(self._loop) is self:
+            del _SHARED[self._loop]  # the entry would keep the loop alive
 
     def _arm(self, when: float) -> None:
         """Expire at monotonic time `when` (at once if that has passed)."""
@@ -123,3 +130,15 @@ class PreciseTimer:
                 heapq.heappop(heap)
             if heap and self._fd >= 0 and (self._armed_at is None or heap[0][0] < self._armed_at):
                 self._arm(heap[0][0])
+
+
+_SHARED: weakref.WeakKeyDictionary[asyncio.AbstractEventLoop, PreciseTimer] = weakref.WeakKeyDictionary()
+
+
+def shared_timer(loop: asyncio.AbstractEventLoop) -> PreciseTimer:
+    """The loop's one `PreciseTimer` (created on first use, and again after a `close()`),
+    so the daemon's device wake-ups and every link's pacing share one timerfd."""
+    timer = _SHARED.get(loop)
+    if timer is None or timer.closed:
+        timer = _SHARED[loop] = PreciseTimer(loop)
+    return timer
