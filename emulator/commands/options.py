@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 from pathlib import Path
 
 from emulator.control.events import read_events, world_events
@@ -47,14 +48,28 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
     return scene
 
 
+MAX_SIMULATED_TIME_S = 1e7  # 115 days: far beyond any run, far inside the µs grid's exact range
+
+
+def simulated_time(text: str) -> float:
+    """An argparse type: a simulated time in seconds, finite and within 0..MAX_SIMULATED_TIME_S."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds, got {text!r}") from None
+    if not math.isfinite(value) or not 0 <= value <= MAX_SIMULATED_TIME_S:
+        raise argparse.ArgumentTypeError(f"must be a time in 0..{MAX_SIMULATED_TIME_S:g} s, got {text!r}")
+    return value
+
+
 def add_span_options(
     parser: argparse.ArgumentParser, *, verb: str, out_metavar: str, out_help: str, required: bool = True
 ) -> None:
     """`--sensor NAME --start T0 --end T1 --out FILE`: one sensor's scans over a span of simulated time
     (`required=False`: the caller checks --sensor and --end itself, for modes that need neither)."""
     parser.add_argument("--sensor", required=required, metavar="NAME", help=f"the scene's sensor to {verb}")
-    parser.add_argument("--start", type=float, default=0.0, metavar="T0", help="first simulated time (s)")
-    parser.add_argument("--end", type=float, required=required, metavar="T1", help="last simulated time (s)")
+    parser.add_argument("--start", type=simulated_time, default=0.0, metavar="T0", help="first simulated time (s)")
+    parser.add_argument("--end", type=simulated_time, required=required, metavar="T1", help="last simulated time (s)")
     parser.add_argument("--out", required=True, type=Path, metavar=out_metavar, help=out_help)
 
 

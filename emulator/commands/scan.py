@@ -14,7 +14,13 @@ import argparse
 import json
 import sys
 
-from emulator.commands.options import add_events_in_option, add_scene_options, scene_from_args, world_from_args
+from emulator.commands.options import (
+    add_events_in_option,
+    add_scene_options,
+    scene_from_args,
+    simulated_time,
+    world_from_args,
+)
 from emulator.sensors import create_sensor
 from emulator.sensors.scan_json import scan_json
 
@@ -22,7 +28,9 @@ from emulator.sensors.scan_json import scan_json
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_scene_options(parser)
     parser.add_argument("--sensor", required=True, metavar="NAME", help="the scene's sensor to scan with")
-    parser.add_argument("--time", type=float, default=0.0, metavar="T", help="simulated time in seconds (default 0)")
+    parser.add_argument(
+        "--time", type=simulated_time, default=0.0, metavar="T", help="simulated time in seconds (default 0)"
+    )
     add_events_in_option(parser, "--events")
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import math
 import os
 import signal
 import sys
@@ -81,12 +82,16 @@ def endpoint_overrides(items: list[str]) -> dict[str, list[str]]:
     return overrides
 
 
+MAX_SPEED = 1000.0  # simulated seconds per wall second: beyond this scans could not keep up anyway
+
+
 def run(args: argparse.Namespace) -> int:
-    if not args.speed > 0:
-        raise UserError(f"--speed must be > 0, got {args.speed}")
+    if not (math.isfinite(args.speed) and 0 < args.speed <= MAX_SPEED):
+        raise UserError(f"--speed must be > 0 and <= {MAX_SPEED:g}, got {args.speed}")
     overrides = endpoint_overrides(args.endpoint)
     scene = scene_from_args(args)
     sensors = served_sensors(scene, args.sensors)
+    refuse_nothing_to_serve(scene, overrides, sensors)
     if args.workers is not None and args.workers < 0:
         raise UserError(f"--workers must be >= 0, got {args.workers}")
     workers = args.workers if args.workers is not None else os.cpu_count() or 1
@@ -113,6 +118,18 @@ def run(args: argparse.Namespace) -> int:
     finally:
         session.close()
     return 0
+
+
+def refuse_nothing_to_serve(
+    scene: Scene, overrides: Mapping[str, Sequence[str]], sensors: Sequence[str] | None
+) -> None:
+    """A daemon with no endpoint would run forever in silence: say so instead."""
+    where = scene.path.name if scene.path is not None else "the scene"
+    if not scene.sensors:
+        raise UserError(f"{where}: sensors: the scene has no [[sensors]] to serve")
+    served = [spec for spec in scene.sensors if sensors is None or spec.name in sensors]
+    if not any(overrides.get(spec.name, spec.endpoints) for spec in served):
+        raise UserError(f"{where}: sensors: no sensor has an endpoint (give one with --endpoint SENSOR=URI)")
 
 
 def served_sensors(scene: Scene, listed: str | None) -> tuple[str, ...] | None:

@@ -7,6 +7,7 @@ lengths; the meshes here are what Embree sees.
 
 from __future__ import annotations
 
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,7 @@ import trimesh
 from emulator.scene.model import Box, Cylinder, MeshFile, Pose, Shape, Sphere
 
 MESH_SUFFIXES = (".glb", ".gltf", ".obj", ".stl", ".ply")
+MAX_MESH_FILE_BYTES = 256 * 1024 * 1024  # 2 M triangles of binary STL are 100 MB
 SPHERE_SUBDIVISIONS = 3
 CYLINDER_SECTIONS = 64
 
@@ -27,8 +29,15 @@ def load_mesh_file(path: Path) -> trimesh.Trimesh:
     """Load a mesh file as one triangle mesh (a glTF scene is flattened)."""
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise MeshLoadError(f"unsupported mesh format {path.suffix!r} (use {', '.join(MESH_SUFFIXES)})")
-    if not path.is_file():
-        raise MeshLoadError(f"mesh file not found: {path}")
+    try:
+        status = path.stat()
+    except OSError as error:
+        raise MeshLoadError(f"mesh file not found: {path}" if isinstance(error, FileNotFoundError)
+                            else f"cannot read mesh {path}: {error.strerror}") from None
+    if not stat.S_ISREG(status.st_mode):  # never open a FIFO (it would block) or a device
+        raise MeshLoadError(f"mesh {path} is not a regular file")
+    if status.st_size > MAX_MESH_FILE_BYTES:
+        raise MeshLoadError(f"mesh {path.name} is {status.st_size} bytes; at most {MAX_MESH_FILE_BYTES}")
     try:
         mesh = trimesh.load(path, force="mesh", process=True)
     except Exception as error:  # trimesh raises many kinds for a corrupt file

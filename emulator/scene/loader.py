@@ -5,6 +5,12 @@ keys, wrong types (a boolean is not a number), NaN/inf, out-of-range values,
 duplicate names, unknown materials, unusable meshes and shared endpoints are
 all rejected. Every problem is one `SceneError` line naming the file, the table
 and the key, e.g. ``railway.toml: smoke.plumes[1].rate: must be > 0, got -3``.
+
+A scene's cost is bounded before anything is built (docs/scene-format.md,
+"Limits"): coordinates and lengths within MAX_EXTENT_M, at most
+MAX_PARTICLES_ALIVE plume particles alive at once (Σ rate × lifetime), at most
+MAX_SCENE_ITEMS objects, regions and plumes together, and MAX_MESH_TRIANGLES
+mesh triangles in all.
 """
 
 from __future__ import annotations
@@ -146,6 +152,8 @@ def _read_toml(path: Path) -> dict[str, Any]:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise SceneError(f"{path.name}: {_describe_toml_error(error, text)}") from error
+    except RecursionError:
+        raise SceneError(f"{path.name}: arrays or tables nested too deeply for a scene file") from None
 
 
 def _describe_toml_error(error: tomllib.TOMLDecodeError, text: str) -> str:
@@ -203,6 +211,15 @@ class _Place:
     def error(self, message: str) -> SceneError:
         where = ": ".join(part for part in (self.file, self.path) if part)
         return SceneError(f"{where}: {message}" if where else message, self.path)
+
+
+# Limits on what a scene may cost (docs/scene-format.md, "Limits").
+MAX_EXTENT_M = 100_000.0  # every coordinate, length, speed (m, m/s) lies within ±100 km
+MAX_PARTICLES_ALIVE = 20_000  # Σ over plumes of rate × lifetime (railway has 80; 10 000 cost 24 ms a scan)
+MAX_SCENE_ITEMS = 10_000  # objects + smoke regions + plumes
+MAX_MESH_TRIANGLES = 2_000_000  # triangles of every mesh file, counted once per use
+MAX_SENSORS = 64
+MAX_ENDPOINTS_PER_SENSOR = 8
 
 
 def _as_number(value: Any, place: _Place) -> float:
@@ -328,6 +345,8 @@ class _Table:
                 raise place.error(f"expected 3 numbers, got {_show(raw)}")
             value = _as_number(item, place.index(position))
             _check_bounds(value, item, place.index(position), **bounds)
+            if abs(value) > MAX_EXTENT_M:
+                raise place.index(position).error(f"must lie within ±{MAX_EXTENT_M:g}, got {_show(item)}")
             values.append(value)
         return (values[0], values[1], values[2])
 
@@ -369,9 +388,18 @@ def _build_scene(raw: dict[str, Any], path: Path) -> Scene:
         raise header.place.key("description").error("must be one line")
     materials = _materials(root.tables("materials", MATERIAL_KEYS))
     smoke = root.table("smoke", SMOKE_KEYS) if "smoke" in root else _Table({}, root.place.key("smoke"))
+    object_tables = root.tables("objects", OBJECT_KEYS)
+    region_tables, plume_tables = _region_tables(smoke), smoke.tables("plumes", PLUME_KEYS)
+    items = len(object_tables) + len(region_tables) + len(plume_tables)
+    if items > MAX_SCENE_ITEMS:
+        raise root.place.key("objects").error(
+            f"{len(object_tables)} objects, {len(region_tables)} smoke.regions and {len(plume_tables)} smoke.plumes: "
+            f"at most {MAX_SCENE_ITEMS} in all"
+        )
+    budget = _MeshBudget()
     body_tables = root.tables("bodies", BODY_KEYS)
     bodies = _bodies(body_tables, path.parent)
-    objects = _objects(root.tables("objects", OBJECT_KEYS), materials, path.parent, bodies)
+    objects = _objects(object_tables, materials, path.parent, bodies, budget)
     sensors = _sensors(root.tables("sensors", SENSOR_KEYS), bodies)
     _check_bodies_carry(body_tables, bodies, objects, sensors)
     return Scene(
@@ -383,8 +411,8 @@ def _build_scene(raw: dict[str, Any], path: Path) -> Scene:
         density_to_extinction=header.number("density_to_extinction", 250.0, above=0),
         materials=materials,
         objects=objects,
-        regions=_regions(_region_tables(smoke), path.parent),
-        plumes=_plumes(smoke.tables("plumes", PLUME_KEYS)),
+        regions=_regions(region_tables, path.parent, budget),
+        plumes=_plumes(plume_tables),
         sensors=sensors,
         bodies=bodies,
     )
@@ -408,7 +436,21 @@ def _materials(tables: list[_Table]) -> Mapping[str, Material]:
     return MappingProxyType(materials)
 
 
-def _shape(table: _Table, scene_dir: Path, *, closed: bool) -> Shape:
+class _MeshBudget:
+    """Mesh triangles used so far in one scene, against MAX_MESH_TRIANGLES."""
+
+    def __init__(self) -> None:
+        self.triangles = 0
+
+    def spend(self, triangles: int, place: _Place) -> None:
+        self.triangles += triangles
+        if self.triangles > MAX_MESH_TRIANGLES:
+            raise place.error(
+                f"the scene's meshes reach {self.triangles} triangles; at most {MAX_MESH_TRIANGLES} in all"
+            )
+
+
+def _shape(table: _Table, scene_dir: Path, budget: _MeshBudget, *, closed: bool) -> Shape:
     """Exactly one of box, sphere, cylinder, mesh; a smoke region's mesh must be `closed` (watertight)."""
     present = [key for key in SHAPE_KEYS if key in table]
     if not present:
@@ -419,16 +461,18 @@ def _shape(table: _Table, scene_dir: Path, *, closed: bool) -> Shape:
     if kind == "box":
         return Box(table.table("box", ("size",)).vec3("size", above=0))
     if kind == "sphere":
-        return Sphere(table.table("sphere", ("radius",)).number("radius", above=0))
+        return Sphere(table.table("sphere", ("radius",)).number("radius", above=0, at_most=MAX_EXTENT_M))
     if kind == "cylinder":
         cylinder = table.table("cylinder", ("radius", "height"))
-        return Cylinder(cylinder.number("radius", above=0), cylinder.number("height", above=0))
+        return Cylinder(cylinder.number("radius", above=0, at_most=MAX_EXTENT_M),
+                        cylinder.number("height", above=0, at_most=MAX_EXTENT_M))
     mesh_path = (scene_dir / table.string("mesh")).resolve()
     place = table.place.key("mesh")
     try:
         mesh = load_mesh_file(mesh_path)
     except MeshLoadError as error:
         raise place.error(str(error)) from error
+    budget.spend(len(mesh.faces), place)
     if closed and not mesh.is_watertight:
         raise place.error(f"mesh {mesh_path.name} is not watertight; a smoke region must be a closed volume")
     return MeshFile(mesh_path)
@@ -446,7 +490,8 @@ def _body_of(table: _Table, bodies: tuple[Body, ...]) -> str | None:
 
 
 def _objects(
-    tables: list[_Table], materials: Mapping[str, Material], scene_dir: Path, bodies: tuple[Body, ...]
+    tables: list[_Table], materials: Mapping[str, Material], scene_dir: Path, bodies: tuple[Body, ...],
+    budget: _MeshBudget,
 ) -> tuple[SceneObject, ...]:
     seen: dict[str, str] = {}
     objects = []
@@ -457,7 +502,7 @@ def _objects(
             known = ", ".join(sorted(materials))
             raise table.place.key("material").error(f"unknown material {_show(material)} (known: {known})")
         objects.append(
-            SceneObject(name, _shape(table, scene_dir, closed=False), table.pose(), material, _body_of(table, bodies))
+            SceneObject(name, _shape(table, scene_dir, budget, closed=False), table.pose(), material, _body_of(table, bodies))
         )
     return tuple(objects)
 
@@ -505,10 +550,10 @@ def _region_tables(smoke: _Table) -> list[_Table]:
     return smoke.tables("regions", REGION_KEYS)
 
 
-def _regions(tables: list[_Table], scene_dir: Path) -> tuple[SmokeRegion, ...]:
+def _regions(tables: list[_Table], scene_dir: Path, budget: _MeshBudget) -> tuple[SmokeRegion, ...]:
     seen: dict[str, str] = {}
     return tuple(
-        SmokeRegion(table.name(seen), _shape(table, scene_dir, closed=True), table.pose(), _density(table))
+        SmokeRegion(table.name(seen), _shape(table, scene_dir, budget, closed=True), table.pose(), _density(table))
         for table in tables
     )
 
@@ -516,6 +561,7 @@ def _regions(tables: list[_Table], scene_dir: Path) -> tuple[SmokeRegion, ...]:
 def _plumes(tables: list[_Table]) -> tuple[Plume, ...]:
     seen: dict[str, str] = {}
     plumes = []
+    alive = 0.0
     for table in tables:
         name = table.name(seen)
         start = table.number("start", 0.0)
@@ -529,16 +575,22 @@ def _plumes(tables: list[_Table]) -> tuple[Plume, ...]:
                 source=table.vec3("source"),
                 rate=table.number("rate", above=0),
                 lifetime=table.number("lifetime", above=0),
-                size=table.number("size", above=0),
-                growth=table.number("growth", 0.0, at_least=0),
+                size=table.number("size", above=0, at_most=MAX_EXTENT_M),
+                growth=table.number("growth", 0.0, at_least=0, at_most=MAX_EXTENT_M),
                 velocity=table.vec3("velocity", ORIGIN),
-                spread=table.number("spread", 0.0, at_least=0),
+                spread=table.number("spread", 0.0, at_least=0, at_most=MAX_EXTENT_M),
                 wind=table.vec3("wind", ORIGIN),
                 density=table.number("density", at_least=0),
                 start=start,
                 stop=stop,
             )
         )
+        alive += plumes[-1].rate * plumes[-1].lifetime
+        if alive > MAX_PARTICLES_ALIVE:
+            raise table.place.key("rate").error(
+                f"rate × lifetime of the plumes so far is {alive:.6g} particles alive at once; "
+                f"a scene may have at most {MAX_PARTICLES_ALIVE} (lower rate or lifetime)"
+            )
     return tuple(plumes)
 
 
@@ -559,6 +611,8 @@ def _endpoints(table: _Table, claims: EndpointClaims, sensor: str) -> tuple[str,
     raw = table.raw("endpoints", [])
     if not isinstance(raw, list):
         raise place.error(f"expected a list of endpoints, got {_show(raw)}")
+    if len(raw) > MAX_ENDPOINTS_PER_SENSOR:
+        raise place.error(f"{len(raw)} endpoints; a sensor may have at most {MAX_ENDPOINTS_PER_SENSOR}")
     endpoints = []
     for position, item in enumerate(raw):
         item_place = place.index(position)
@@ -604,6 +658,8 @@ def _lms_options(table: _Table) -> dict[str, Any]:
 
 
 def _sensors(tables: list[_Table], bodies: tuple[Body, ...]) -> tuple[SensorSpec, ...]:
+    if len(tables) > MAX_SENSORS:
+        raise tables[MAX_SENSORS].place.error(f"{len(tables)} sensors; a scene may have at most {MAX_SENSORS}")
     seen: dict[str, str] = {}
     claims = EndpointClaims()
     sensors = []
