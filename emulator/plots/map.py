@@ -23,7 +23,7 @@ from emulator.scene import Pose, Scene, SceneObject, Shape
 from emulator.scene.bodies import Body, BodyPoses, Frames, Keyframes
 from emulator.scene.geometry import world_mesh
 from emulator.scene.plumes import particles_at
-from emulator.sensors import create_sensor, ranges_m
+from emulator.sensors import beam_times_s, create_sensor, ranges_m
 from emulator.sensors.mount import SensorMount
 
 BACKGROUND_RGB = (1.0, 1.0, 1.0)
@@ -135,7 +135,7 @@ def scan_points(scene: Scene, sensor: str, time_s: float) -> tuple[np.ndarray, n
     scan = create_sensor(scene, sensor).configured_scan(time_s)
     ranges = ranges_m(scan)
     seen = ~np.isnan(ranges)
-    beam_poses = sensor_poses_2d(scene, sensor, scan.beam_times_s[seen])
+    beam_poses = sensor_poses_2d(scene, sensor, beam_times_s(scan)[seen])
     angles = np.asarray(scan.angles_rad, dtype=float)[seen] + beam_poses[:, 2]
     points = beam_poses[:, :2] + ranges[seen, None] * np.column_stack([np.cos(angles), np.sin(angles)])
     return points, sensor_poses_2d(scene, sensor, np.array([time_s]))[0]

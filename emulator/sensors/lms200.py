@@ -138,8 +138,12 @@ class LmsSensor:
             return cast_moving(self.world, self.scene, self.spec, self.mount, window.angles_rad, window.offsets_s, instants, REACH_M)
         casts = []
         for time_s in instants:
-            hits = self.world.cast_prepared(prepared, time_s, time_s + window.offsets_s)
-            beams = Beams(self.scene, self._fixed_spec, self.world, time_s, window.angles_rad, prepared.origins, prepared.directions)
+            beam_times = time_s + window.offsets_s
+            hits = self.world.cast_prepared(prepared, time_s, beam_times)
+            beams = Beams(
+                self.scene, self._fixed_spec, self.world, time_s, window.angles_rad, prepared.origins, prepared.directions,
+                beam_times_s=beam_times if self.world.moving else None,  # sub-rays then meet moving solids at their instants
+            )
             casts.append((hits, beams))
         return casts
 

@@ -101,8 +101,13 @@ class UrgSensor:
             return cast_moving(self.world, self.scene, self.spec, self.mount, self._valid_angles, self._valid_offsets, instants, MAX_RANGE_M)
         casts = []
         for time_s in instants:
-            hits = self.world.cast_prepared(self._prepared, time_s, time_s + self._valid_offsets)
-            casts.append((hits, Beams(self.scene, self._fixed_spec, self.world, time_s, self._valid_angles, self._origins, self._directions)))
+            beam_times = time_s + self._valid_offsets
+            hits = self.world.cast_prepared(self._prepared, time_s, beam_times)
+            beams = Beams(
+                self.scene, self._fixed_spec, self.world, time_s, self._valid_angles, self._origins, self._directions,
+                beam_times_s=beam_times if self.world.moving else None,  # sub-rays then meet moving solids at their instants
+            )
+            casts.append((hits, beams))
         return casts
 
     def configured_scan(self, time_s: float) -> Scan:
