@@ -80,6 +80,10 @@ class ServeProcess:
     sensor named there has printed one ready line per URI given for it, and
     raises ServeError (with the daemon's stderr) if it exits or stays silent
     for `timeout_s`. Sensors not named keep the scene's own endpoints.
+    The browser view is off unless `extra_args` ask for it (`--view`), so
+    daemons started side by side do not compete for its port. `services`
+    holds the `ready NAME URL` lines (view, foxglove, control) seen so far;
+    `service(NAME)` waits for one.
     """
 
     def __init__(
@@ -98,7 +102,10 @@ class ServeProcess:
         if "--control" not in self.args:
             self.args += ["--control", "127.0.0.1:0"]
         wants_control = self.args[self.args.index("--control") + 1] != "off"
+        if "--view" not in self.args:
+            self.args += ["--view", "off"]
         self.ready: list[ReadyEndpoint] = []
+        self.services: dict[str, str] = {}
         self.control_url: str | None = None
         self._stdout_lines: queue.Queue[str | None] = queue.Queue()
         self._stderr_chunks: list[str] = []
@@ -126,6 +133,29 @@ class ServeProcess:
     @property
     def stderr(self) -> str:
         return "".join(self._stderr_chunks)
+
+    def service(self, name: str, timeout_s: float = 30.0) -> str:
+        """The URL of the `ready NAME URL` line (view, foxglove, control), waiting for it."""
+        deadline = time.monotonic() + timeout_s
+        while name not in self.services:
+            try:
+                line = self._stdout_lines.get(timeout=max(deadline - time.monotonic(), 0.0))
+            except queue.Empty:
+                raise ServeError(f"no `ready {name}` line after {timeout_s} s\n{self.stderr}") from None
+            if line is None:
+                raise ServeError(f"serve exited before `ready {name}`\n{self.stderr}")
+            self._note(line)
+        return self.services[name]
+
+    def _note(self, line: str) -> None:
+        words = line.split()
+        if len(words) == 3 and words[0] == "ready":
+            self.services[words[1]] = words[2]
+            if words[1] == "control":
+                self.control_url = words[2]
+        ready = parse_ready_line(line)
+        if ready is not None:
+            self.ready.append(ready)
 
     def endpoint(self, sensor: str, scheme: str | None = None) -> ReadyEndpoint:
         """The ready endpoint of `sensor` (of the given scheme: "pty" or "tcp")."""
@@ -183,9 +213,4 @@ class ServeProcess:
                     f"serve exited with status {self.process.returncode} before it was ready: "
                     f"{' '.join(self.args)}\n{self.stderr}"
                 )
-            if line.startswith("ready control "):
-                self.control_url = line.split()[2]
-                continue
-            ready = parse_ready_line(line)
-            if ready is not None:
-                self.ready.append(ready)
+            self._note(line)

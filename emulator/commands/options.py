@@ -91,3 +91,17 @@ def world_from_args(scene: Scene, args: argparse.Namespace) -> World:
             except ValueError as error:  # a live pose stamped before the body's last one
                 raise UserError(f"{args.events_in}: {error}") from None
     return world
+
+
+LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
+
+
+def parse_listen(option: str, text: str) -> tuple[str, int] | None:
+    """`HOST:PORT` (port 0: any free one) → (host, port); `off` → None; anything else a UserError."""
+    if text == "off":
+        return None
+    host, sep, port = text.rpartition(":")
+    host = host.strip("[]")
+    if not sep or not host or not port.isdigit() or int(port) > 65535:
+        raise UserError(f"{option} {text!r}: expected HOST:PORT or off")
+    return host, int(port)

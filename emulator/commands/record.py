@@ -1,6 +1,8 @@
-"""`lrf-emulator record SCENE --sensor NAME --start T0 --end T1 --out FILE` (CLI.md).
+"""`lrf-emulator record SCENE --sensor NAME --start T0 --end T1 --out FILE [--format text|mcap]` (CLI.md).
 
-Writes one log line per scan (emulator/recording/textlog.py) at the sensor's scan
+Writes one log line per scan (emulator/recording/textlog.py), or with
+`--format mcap` an MCAP file with the scene's Foxglove channels
+(emulator/recording/mcap.py), at the sensor's scan
 period, as the scene configures it (`configured_scan`, `configured_period_s`):
 the URG-04LX every 0.1 s; the LMS200 every full scan of its resolution, i.e.
 the mirror revolutions that scan needs (1°: 1/75 s, 0.5°: 2/75 s,
@@ -28,6 +30,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_scene_options(parser, seed=False)
     add_span_options(parser, verb="record", out_metavar="FILE", out_help="log file to write")
     add_events_in_option(parser, "--events")
+    parser.add_argument(
+        "--format", choices=("text", "mcap"), default="text",
+        help="text: the seed dataset's log (default); mcap: Foxglove LaserScan, device values, transforms and scene",
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -39,9 +45,15 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"no scan of {sensor.name} completes between {args.start} and {args.end} s")
     truth_path = ground_truth_path(args.out)
     try:
-        with args.out.open("w", encoding="ascii") as out, truth_path.open("w", encoding="ascii") as truth:
-            header = LogHeader(sensor.name, sensor.model, first.unit)
-            count = write_log(out, with_ground_truth(itertools.chain([first], scans), sensor, truth), header)
+        with truth_path.open("w", encoding="ascii") as truth:
+            every_scan = with_ground_truth(itertools.chain([first], scans), sensor, truth)
+            if args.format == "mcap":
+                from emulator.recording.mcap import record_mcap  # foxglove-sdk: loaded only when asked for
+
+                count = record_mcap(args.out, scene, sensor.name, every_scan)
+            else:
+                with args.out.open("w", encoding="ascii") as out:
+                    count = write_log(out, every_scan, LogHeader(sensor.name, sensor.model, first.unit))
     except OSError as error:
         raise UserError(f"cannot write {error.filename or args.out}: {error.strerror}") from None
     print(f"recorded {count} scans of {sensor.name} ({sensor.model}) to {args.out}, ground truth to {truth_path}")

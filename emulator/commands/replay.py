@@ -1,4 +1,6 @@
-"""`lrf-emulator replay LOG --model urg-04lx|lms200 [--endpoint URI]...` (CLI.md).
+"""`lrf-emulator replay LOG --model urg-04lx|lms200 [--endpoint URI]...` (CLI.md),
+and `replay FILE.mcap --topic T --model ...`: a LaserScan topic of an MCAP file
+(a ROS 2 bag or a Foxglove recording; emulator/recording/mcap_replay.py).
 
 Serves a recorded log (from `record`, or a real sensor's log in the same
 format) through the real protocol on the daemon, at the log's recorded rate,
@@ -18,6 +20,7 @@ import numpy as np
 from emulator.commands.serve import serve_until_signalled
 from emulator.daemon.clock import WallClock
 from emulator.daemon.service import Daemon
+from emulator.errors import UserError
 from emulator.recording.replay_sources import (
     LMS_MODEL,
     MODELS,
@@ -27,13 +30,16 @@ from emulator.recording.replay_sources import (
 from emulator.recording.textlog import Log, read_log
 from emulator.scene.model import Pose, Scene, SensorSpec
 
+MCAP_MAGIC = b"\x89MCAP"
 DEFAULT_ENDPOINTS = {URG_MODEL: "tcp:127.0.0.1:10940", LMS_MODEL: "pty:ttyLMS0"}
 DEFAULT_NAMES = {URG_MODEL: "urg", LMS_MODEL: "lms"}
 LMS_WINDOWS = {(180, 1.0), (180, 0.5), (100, 1.0), (100, 0.5), (100, 0.25)}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("log", type=Path, metavar="LOG", help="a log written by `record` (or in its format)")
+    parser.add_argument("log", type=Path, metavar="LOG", help="a log written by `record` (or in its format), or an MCAP file")
+    parser.add_argument("--topic", metavar="T", default=None,
+                        help="for an MCAP file: the LaserScan topic to serve (default: its only one)")
     parser.add_argument("--model", required=True, choices=MODELS, help="the device to serve the log as")
     parser.add_argument(
         "--endpoint", action="append", default=[], metavar="URI",
@@ -53,19 +59,47 @@ def lms_options(log: Log) -> dict[str, object]:
 
 
 def replay_scene(log: Log, model: str, endpoints: list[str]) -> Scene:
-    """A scene holding just the replayed sensor, for the daemon."""
+    """The scene for a text log: its sensor, named from the header, in the log's LMS200 window."""
     name = log.header.sensor or DEFAULT_NAMES[model]
     options = lms_options(log) if model == LMS_MODEL else {}
-    spec = SensorSpec(name, model, Pose(), tuple(endpoints or [DEFAULT_ENDPOINTS[model]]), options)
+    return sensor_only_scene(SensorSpec(name, model, Pose(), tuple(endpoints or [DEFAULT_ENDPOINTS[model]]), options))
+
+
+def sensor_only_scene(spec: SensorSpec) -> Scene:
+    """A scene holding just the replayed sensor, for the daemon."""
     return Scene(
-        path=None, name=f"replay of {name}", description="", seed=0, model="formsma2011",
+        path=None, name=f"replay of {spec.name}", description="", seed=0, model="formsma2011",
         density_to_extinction=250.0, materials={}, objects=(), regions=(), plumes=(), sensors=(spec,),
     )
 
 
+def is_mcap(path: Path) -> bool:
+    """An MCAP file starts with its magic bytes, whatever its name."""
+    try:
+        with open(path, "rb") as file:
+            return file.read(len(MCAP_MAGIC)) == MCAP_MAGIC
+    except OSError:
+        return False
+
+
 def run(args: argparse.Namespace) -> int:
+    if is_mcap(args.log):
+        return _run_mcap(args)
+    if args.topic is not None:
+        raise UserError(f"--topic: {args.log} is not an MCAP file")
     log = read_log(args.log)
     sensor = replay_sensor(log, args.model, log.header.sensor or DEFAULT_NAMES[args.model])
     scene = replay_scene(log, args.model, args.endpoint)
+    serve_until_signalled(Daemon(scene, None, WallClock(), sensor_factory=lambda spec: sensor))
+    return 0
+
+
+def _run_mcap(args: argparse.Namespace) -> int:
+    from emulator.recording.mcap_replay import LaserScanReplay, read_laser_scans  # mcap readers: only when asked for
+
+    scans = read_laser_scans(args.log, args.topic)
+    name = DEFAULT_NAMES[args.model]
+    sensor = LaserScanReplay(scans, args.model, name)
+    scene = sensor_only_scene(SensorSpec(name, args.model, Pose(), tuple(args.endpoint or [DEFAULT_ENDPOINTS[args.model]]), {}))
     serve_until_signalled(Daemon(scene, None, WallClock(), sensor_factory=lambda spec: sensor))
     return 0

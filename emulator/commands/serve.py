@@ -1,7 +1,9 @@
 """`lrf-emulator serve`: the daemon (CLI.md).
 
 Prints `ready SENSOR MODEL URI[ -> /dev/pts/N]` as each endpoint serves, then
-`ready control http://HOST:PORT` when the control API (CONTROL_API.md) listens.
+`ready control http://HOST:PORT` when the control API (CONTROL_API.md) listens,
+`ready foxglove ws://HOST:PORT` and `ready view http://HOST:PORT` for Foxglove
+live and the browser view (emulator/view); `--mcap FILE` records the session.
 SIGINT / SIGTERM / SIGHUP / SIGQUIT stop it (symlinks removed, exit 0; during
 start-up: exit 128 + the signal's number, no traceback); SIGUSR1 prints one
 `stats` line on stderr (clients, fds, asyncio tasks) for operators and tests.
@@ -11,25 +13,37 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import importlib
 import math
 import os
 import signal
 import sys
 from pathlib import Path
+from typing import Sequence
 
-from emulator.commands.options import add_events_in_option, add_scene_options, scene_from_args
+from emulator.commands.options import (
+    LOOPBACK_HOSTS,
+    add_events_in_option,
+    add_scene_options,
+    parse_listen,
+    scene_from_args,
+)
 from emulator.commands import stopping
 from emulator.commands.stopping import STOP_SIGNALS
 from emulator.control.events import ControlError, EventWriter, read_events
+from emulator.control.scan_feed import configured_request
 from emulator.control.server import DEFAULT_ADDRESS, ControlAddress, ControlServer, check_exposure, parse_control_address
 from emulator.control.session import LiveSession
 from emulator.daemon.clock import WallClock
 from emulator.daemon.memory import keep_freed_memory
 from emulator.daemon.service import Daemon, Ready
 from emulator.errors import UserError
+from emulator.recording.world_snapshot import SceneSnapshots
 from emulator.scene import Scene
+from emulator.view.feed import LiveFeed
 
 SWITCH_INTERVAL_S = 0.0005
+DEFAULT_VIEW = "127.0.0.1:8080"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -69,6 +83,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="N",
         help="worker processes computing scans (default: one per core, at most one per sensor; 0: in-process)",
     )
+    parser.add_argument(
+        "--view", metavar="HOST:PORT|off", default=None,
+        help=f"the browser view (default {DEFAULT_VIEW}; quietly off if that port is taken; loopback only)",
+    )
+    parser.add_argument("--foxglove", metavar="HOST:PORT", default="off",
+                        help="stream the scene's Foxglove channels over Foxglove's WebSocket protocol (default off)")
+    parser.add_argument("--mcap", type=Path, metavar="FILE", default=None,
+                        help="record the session's scans, transforms and scene to an MCAP file")
 
 
 def endpoint_overrides(items: list[str]) -> dict[str, list[str]]:
@@ -89,6 +111,7 @@ def run(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.speed) and 0 < args.speed <= MAX_SPEED):
         raise UserError(f"--speed must be > 0 and <= {MAX_SPEED:g}, got {args.speed}")
     overrides = endpoint_overrides(args.endpoint)
+    watching = Watching.from_args(args)
     scene = scene_from_args(args)
     sensors = served_sensors(scene, args.sensors)
     refuse_nothing_to_serve(scene, overrides, sensors)
@@ -105,8 +128,10 @@ def run(args: argparse.Namespace) -> int:
     control = parse_control_address(args.control)
     check_exposure(control, args.control_token)
     replayed = read_events(args.events_in, scene) if args.events_in is not None else []
-    daemon = Daemon(scene, overrides, clock, sensors=sensors, workers=workers)
+    watching.feed = LiveFeed(clock.now)
+    daemon = Daemon(scene, overrides, clock, sensors=sensors, workers=workers, on_scan=watching.feed.scan_delivered)
     session = LiveSession(daemon, EventWriter(args.events) if args.events is not None else None)
+    watching.prepare(daemon, sensors, args.control_token)
     try:
         for event in replayed:
             if event.op != "clock":  # the clock's changes are kept in the log; scans do not depend on them
@@ -114,8 +139,9 @@ def run(args: argparse.Namespace) -> int:
                     session.apply(event)
                 except ControlError as error:
                     raise UserError(f"--events-in {args.events_in}: {error}") from None
-        serve_until_signalled(daemon, session, control, args.control_token)
+        serve_until_signalled(daemon, session, control, args.control_token, watching)
     finally:
+        watching.stop()
         session.close()
     return 0
 
@@ -130,6 +156,75 @@ def refuse_nothing_to_serve(
     served = [spec for spec in scene.sensors if sensors is None or spec.name in sensors]
     if not any(overrides.get(spec.name, spec.endpoints) for spec in served):
         raise UserError(f"{where}: sensors: no sensor has an endpoint (give one with --endpoint SENSOR=URI)")
+
+
+class Watching:
+    """The viewers `serve` was asked for (browser view, Foxglove live, MCAP): their options, and
+    once every endpoint serves, the running ones, each on threads of its own."""
+
+    def __init__(self, view: tuple[str, int] | None, explicit_view: bool,
+                 foxglove: tuple[str, int] | None, mcap: Path | None) -> None:
+        self.view, self.explicit_view, self.foxglove, self.mcap = view, explicit_view, foxglove, mcap
+        self.feed: LiveFeed | None = None
+        self.running: list = []
+
+    @staticmethod
+    def from_args(args: argparse.Namespace) -> Watching:
+        view = parse_listen("--view", args.view if args.view is not None else DEFAULT_VIEW)
+        if view is not None and view[0] not in LOOPBACK_HOSTS:
+            raise UserError(f"--view {args.view}: the view changes the world, so it listens on loopback only")
+        foxglove = parse_listen("--foxglove", args.foxglove)
+        # viser and foxglove-sdk take a while to import: before the loop runs, never on it
+        if view is not None:
+            importlib.import_module("emulator.view.browser")
+        if foxglove is not None or args.mcap is not None:
+            importlib.import_module("emulator.view.foxglove_live")
+        return Watching(view, args.view is not None, foxglove, args.mcap)
+
+    def prepare(self, daemon: Daemon, sensors: Sequence[str] | None, token: str | None) -> None:
+        self.daemon, self.token = daemon, token
+        self.served = [spec for spec in daemon.scene.sensors if sensors is None or spec.name in sensors]
+
+    def start(self, control_url: str | None) -> None:
+        """On the loop thread, once every endpoint (and the control API) serves: start what was
+        asked for, printing ready lines; a default view whose port is taken stays off, with a note."""
+        daemon, feed = self.daemon, self.feed
+        assert feed is not None
+        snapshots = SceneSnapshots(daemon.scene, daemon.live)
+        if self.foxglove is not None or self.mcap is not None:
+            from emulator.view.foxglove_live import FoxglovePublisher
+
+            publisher = FoxglovePublisher(daemon.scene, feed, snapshots, daemon.clock.now,
+                                          sensors=[spec.name for spec in self.served],
+                                          mcap_path=self.mcap, websocket=self.foxglove)
+            publisher.start()
+            self.running.append(publisher)
+            if publisher.url is not None:
+                print(f"ready foxglove {publisher.url}", flush=True)
+        if self.view is not None:
+            from emulator.view.browser import BrowserView, PortTaken
+            from emulator.view.control_client import ControlClient
+
+            control = ControlClient(control_url, self.token) if control_url is not None else None
+            try:
+                browser = BrowserView(daemon.scene, feed, snapshots, daemon.clock, self.view, control)
+            except PortTaken as taken:
+                if self.explicit_view:
+                    raise UserError(f"--view {self.view[0]}:{self.view[1]}: {taken}") from None
+                print(f"view off: {taken} (choose one with --view HOST:PORT)", file=sys.stderr, flush=True)
+            else:
+                browser.start()
+                self.running.append(browser)
+                print(f"ready view {browser.url}", flush=True)
+        feed.start(daemon.scan_caches, {spec.name: configured_request(spec) for spec in self.served},
+                   asyncio.get_running_loop())
+
+    def stop(self) -> None:
+        for watcher in reversed(self.running):
+            watcher.stop()
+        self.running.clear()
+        if self.feed is not None:
+            self.feed.stop()
 
 
 def served_sensors(scene: Scene, listed: str | None) -> tuple[str, ...] | None:
@@ -149,18 +244,20 @@ def serve_until_signalled(
     session: LiveSession | None = None,
     control: ControlAddress | None = None,
     token: str | None = None,
+    watching: Watching | None = None,
 ) -> None:
     """Run the daemon until a stop signal (SIGINT, SIGTERM, SIGHUP, SIGQUIT), announcing each ready
-    endpoint (and the control API) on stdout."""
+    endpoint (and the control API, and what `watching` starts) on stdout."""
     # While the scan thread computes, the loop thread must get the GIL back within
     # a fraction of a millisecond to answer commands (the default is 5 ms).
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     keep_freed_memory()  # scans computed in this process (--workers 0) reuse their temporaries
-    asyncio.run(_serve(daemon, session, control, token))
+    asyncio.run(_serve(daemon, session, control, token, watching))
 
 
 async def _serve(
-    daemon: Daemon, session: LiveSession | None, control: ControlAddress | None, token: str | None
+    daemon: Daemon, session: LiveSession | None, control: ControlAddress | None, token: str | None,
+    watching: Watching | None = None,
 ) -> None:
     loop = asyncio.get_running_loop()
     for signum in STOP_SIGNALS:
@@ -172,7 +269,7 @@ async def _serve(
     if server is not None:
         await server.start()  # before any endpoint serves: a port in use stops serve at once
     try:
-        await daemon.run(_announce, lambda: server is not None and _announce_control(server))
+        await daemon.run(_announce, lambda: _started(server, watching))
     finally:
         if server is not None:
             await server.close()
@@ -182,8 +279,11 @@ def _announce(ready: Ready) -> None:
     print(ready.line, flush=True)
 
 
-def _announce_control(server: ControlServer) -> None:
-    print(f"ready control {server.address.url}", flush=True)
+def _started(server: ControlServer | None, watching: Watching | None) -> None:
+    if server is not None:
+        print(f"ready control {server.address.url}", flush=True)
+    if watching is not None:
+        watching.start(server.address.url if server is not None else None)
 
 
 def _print_stats(daemon: Daemon) -> None:

@@ -49,6 +49,7 @@ class ScanSource(Protocol):
 
 
 SensorFactory = Callable[[SensorSpec], ScanSource]
+ScanObserver = Callable[[Scan], None]
 RequestKey = tuple[tuple[str, Any], ...]
 
 
@@ -66,6 +67,7 @@ class ScanCache:
         batch: int = SCAN_BATCH,
         *,
         phase: int = 0,
+        observer: ScanObserver | None = None,
     ) -> None:
         if size < 2 * batch:
             raise ValueError(f"a scan cache of {size} cannot hold two batches of {batch}")
@@ -82,6 +84,8 @@ class ScanCache:
         self._recent_times: dict[RequestKey, deque[float]] = {}
         self._predicted_until: dict[RequestKey, float] = {}
         self._strides: dict[RequestKey, float] = {}
+        self._observer = observer  # told of each scan handed to a device (once per instant): must return at once
+        self._observed_tick: int | None = None
 
     def __call__(self, time_s: float, **request: Any) -> Scan:
         """What a device calls: the scan for this request (computed now, alone, if not foreseen)."""
@@ -94,7 +98,18 @@ class ScanCache:
         except BaseException:
             self._forget(future)  # computed again if asked again (a restarted worker may succeed)
             raise
-        return scan if scan.time_s == time_s else dataclasses.replace(scan, time_s=time_s)
+        scan = scan if scan.time_s == time_s else dataclasses.replace(scan, time_s=time_s)
+        if self._observer is not None:
+            tick = round(time_s * TICKS_PER_S)
+            if tick != self._observed_tick:  # several endpoints of one sensor: tell once
+                self._observed_tick = tick
+                self._observer(scan)
+        return scan
+
+    def request(self, time_s: float, **request: Any) -> Future:
+        """The scan for `request` at `time_s` where devices' scans are computed, without waiting
+        (for viewers while no device asks). On the loop thread, like every call here."""
+        return self._future(time_s, request)
 
     def request(self, time_s: float, **request: Any) -> Future:
         """The scan for this request as a future (for readers that must not block, like the control API);

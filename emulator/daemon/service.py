@@ -35,6 +35,7 @@ from emulator.daemon.clock import WallClock
 from emulator.daemon.scan_cache import (
     PREFETCH_LEAD_S,
     ScanCache,
+    ScanObserver,
     SensorFactory,
 )
 from emulator.daemon.workers import ScanJobFailed, WorkerPool
@@ -249,7 +250,9 @@ class Daemon:
     (default: the simulation); `device_factory` builds each endpoint's device.
     `workers` > 0 computes the simulation's scans in that many worker processes
     (at most one per sensor); `sensors` serves only those of the scene (a fleet).
-    `live` holds the live changes applied (`apply`); None for a supplied scan source."""
+    `live` holds the live changes applied (`apply`); None for a supplied scan source.
+    `on_scan` is told of every scan handed to a device (on the loop thread: it must
+    return at once, e.g. by queueing the scan for a recorder's own thread)."""
 
     def __init__(
         self,
@@ -261,11 +264,13 @@ class Daemon:
         device_factory: DeviceFactory = build_device,
         workers: int = 0,
         sensors: Sequence[str] | None = None,
+        on_scan: ScanObserver | None = None,
     ) -> None:
         self.scene = scene
         self.clock = clock or WallClock()
         self.sessions: list[DeviceSession] = []
         self.endpoints: list[PtyEndpoint | TcpEndpoint] = []
+        self._on_scan = on_scan
         self._plan = _only(plan_endpoints(_served(scene, sensors), endpoints_override), sensors)
         self._overridden = frozenset(endpoints_override or ())
         self._sensor_factory = sensor_factory
@@ -295,7 +300,7 @@ class Daemon:
         self._timer = shared_timer(loop)
         readies = []
         for ordinal, (spec, addresses) in enumerate(self._plan):
-            scans = self.scan_caches[spec.name] = ScanCache(factory(spec), executor, phase=ordinal)
+            scans = self.scan_caches[spec.name] = ScanCache(factory(spec), executor, phase=ordinal, observer=self._on_scan)
             self._caches.append(scans)
             for position, address in enumerate(addresses):
                 device = self._device_factory(spec, scans)

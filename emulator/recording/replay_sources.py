@@ -36,11 +36,10 @@ LMS_FIRST_CODE = 8183  # 8183..8191 are codes, not distances
 ANGLE_TOLERANCE_RAD = 1e-4  # a log angle matches a beam within this (logs keep 6 decimals)
 
 
-class _LogClock:
-    """Maps simulated time to a row of the log, looping at the end."""
+class ReplayClock:
+    """Maps simulated time to a row of a recording (its scan times), looping at the end."""
 
-    def __init__(self, log: Log, default_period_s: float) -> None:
-        times = log.times_s
+    def __init__(self, times: np.ndarray, default_period_s: float) -> None:
         self._times = times - times[0]
         period = float(np.median(np.diff(times))) if len(times) > 1 else default_period_s
         self.period_s = period
@@ -65,7 +64,7 @@ class UrgReplay:
         if np.any(off_grid) or np.any((steps < 0) | (steps >= URG_STEPS)):
             raise UserError("log angles are not URG-04LX steps (0..768, 2π/1024 rad apart, 0 = step 384)")
         self.name = name
-        self._clock = _LogClock(log, URG_PERIOD_S)
+        self._clock = ReplayClock(log.times_s, URG_PERIOD_S)
         self._values = np.full((len(log.values), URG_STEPS), URG_NO_ECHO, dtype=np.int64)
         np.put_along_axis(self._values, steps, log.values, axis=1)
         self._angles = (np.arange(URG_STEPS) - URG_FRONT_STEP) * URG_STEP_RAD
@@ -95,7 +94,7 @@ class LmsReplay:
         if log.header.unit not in ("mm", "cm"):
             raise UserError(f"log unit {log.header.unit!r}: an LMS200 log is in mm or cm")
         self.name = name
-        self._clock = _LogClock(log, 2 * LMS_REVOLUTION_S)
+        self._clock = ReplayClock(log.times_s, 2 * LMS_REVOLUTION_S)
         self._unit = log.header.unit
         self._angles = log.angles_rad[0]
         if np.any(np.abs(log.angles_rad - self._angles) > ANGLE_TOLERANCE_RAD):

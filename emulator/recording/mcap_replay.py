@@ -1,0 +1,198 @@
+"""A LaserScan topic of an MCAP file served as a URG-04LX or LMS200 (`replay FILE.mcap --topic T`).
+
+Reads `foxglove.LaserScan` (protobuf, as `record --format mcap` and Foxglove's
+SDKs write it, or JSON) and ROS 2 `sensor_msgs/msg/LaserScan` (CDR, as a ROS 2
+bag in MCAP holds it). Each scan's ranges are resampled onto the device's own
+beams (the nearest recorded beam within half a recorded step; beams the scan
+does not cover get "no echo") and turned into device values by the device's
+conventions (`laserscan.py`), in whatever unit the client asks for.
+
+Time: simulated time 0 is the first message; each scan is stamped with its
+header time (the log time when a message has none); the recording loops as a
+text log's replay does (`replay_sources.ReplayClock`).
+
+A file is not trusted: at most MAX_MESSAGES scans of at most MAX_BEAMS ranges
+each are read; anything else is a one-line error naming the file and topic.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Optional, Sequence
+
+import numpy as np
+from mcap.decoder import DecoderFactory
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+from mcap.records import Schema
+from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
+from mcap_ros2.decoder import DecoderFactory as Ros2DecoderFactory
+
+from emulator.errors import UserError
+from emulator.recording.laserscan import ranges_to_values
+from emulator.recording.replay_sources import (
+    LMS_MODEL,
+    LMS_NO_ECHO,
+    LMS_REVOLUTION_S,
+    URG_MODEL,
+    URG_PERIOD_S,
+    ReplayClock,
+)
+from emulator.sensors import lms200, urg04lx
+from emulator.sensors.scan import Scan
+
+MAX_MESSAGES = 500_000
+MAX_BEAMS = 20_000
+LASERSCAN_SCHEMAS = ("foxglove.LaserScan", "sensor_msgs/msg/LaserScan")
+LMS_GRID_STEP_DEG = 0.25  # the finest LMS200 resolution: every window a client can ask for lies on it
+
+
+class _JsonDecoderFactory(DecoderFactory):
+    """`foxglove.LaserScan` messages in JSON encoding."""
+
+    def decoder_for(self, message_encoding: str, schema: Optional[Schema]) -> Optional[Callable[[bytes], Any]]:
+        if message_encoding == "json":
+            return lambda data: json.loads(data)
+        return None
+
+
+@dataclass(frozen=True)
+class LaserScans:
+    """A topic's scans: times (n,) from 0, and per scan its first angle, step and ranges (metres)."""
+
+    topic: str
+    times_s: np.ndarray
+    start_angles_rad: np.ndarray
+    steps_rad: np.ndarray
+    ranges_m: list[np.ndarray]
+    range_limits_m: list[tuple[float, float]]
+
+
+def _field(message: Any, name: str, default: Any = None) -> Any:
+    if isinstance(message, dict):
+        return message.get(name, default)
+    return getattr(message, name, default)
+
+
+def _stamp_s(message: Any, log_time_ns: int) -> float:
+    header = _field(message, "header")
+    stamp = _field(header, "stamp") if header is not None else _field(message, "timestamp")
+    if stamp is not None:
+        seconds = _field(stamp, "sec", None)
+        seconds = _field(stamp, "seconds", 0) if seconds is None else seconds  # protobuf's Timestamp
+        nanoseconds = next((n for n in (_field(stamp, key) for key in ("nanosec", "nsec", "nanos")) if n is not None), 0)
+        if seconds or nanoseconds:
+            return float(seconds) + float(nanoseconds or 0) * 1e-9
+    return log_time_ns * 1e-9
+
+
+def _scan_geometry(message: Any, count: int) -> tuple[float, float, tuple[float, float]]:
+    """(first angle, step, (range_min, range_max)) of a ROS or Foxglove LaserScan."""
+    if _field(message, "angle_min") is not None or _field(message, "angle_increment") is not None:
+        start, step = float(_field(message, "angle_min", 0.0)), float(_field(message, "angle_increment", 0.0))
+        limits = (float(_field(message, "range_min", 0.0) or 0.0), float(_field(message, "range_max", 0.0) or np.inf))
+        return start, step, limits
+    start, end = float(_field(message, "start_angle", 0.0)), float(_field(message, "end_angle", 0.0))
+    return start, (end - start) / (count - 1) if count > 1 else 0.0, (0.0, np.inf)
+
+
+def read_laser_scans(path: Path, topic: str | None) -> LaserScans:
+    """The scans of `topic` (default: the file's only LaserScan topic)."""
+    try:
+        with open(path, "rb") as file:
+            reader = make_reader(file, decoder_factories=[ProtobufDecoderFactory(), Ros2DecoderFactory(), _JsonDecoderFactory()])
+            topic = _choose_topic(path, reader, topic)
+            times, starts, steps, ranges, limits = [], [], [], [], []
+            for _, _, message, decoded in reader.iter_decoded_messages(topics=[topic], log_time_order=True):
+                if len(times) >= MAX_MESSAGES:
+                    raise UserError(f"{path.name}: topic {topic}: more than {MAX_MESSAGES} scans")
+                values = np.asarray(_field(decoded, "ranges", ()), dtype=float)
+                if not 0 < values.size <= MAX_BEAMS:
+                    raise UserError(f"{path.name}: topic {topic}: a scan with {values.size} ranges (need 1..{MAX_BEAMS})")
+                start, step, limit = _scan_geometry(decoded, values.size)
+                if not (np.isfinite(start) and np.isfinite(step)) or (values.size > 1 and step == 0.0):
+                    raise UserError(f"{path.name}: topic {topic}: a scan without a usable angle step")
+                times.append(_stamp_s(decoded, message.log_time))
+                starts.append(start), steps.append(step), ranges.append(values), limits.append(limit)
+    except FileNotFoundError:
+        raise UserError(f"no such MCAP file: {path}") from None
+    except (McapError, OSError, ValueError, KeyError, TypeError, RuntimeError) as error:
+        raise UserError(f"{path.name}: cannot read MCAP: {error}") from None
+    if not times:
+        raise UserError(f"{path.name}: topic {topic}: no scans")
+    order = np.argsort(np.asarray(times), kind="stable")
+    times_s = np.asarray(times)[order]
+    return LaserScans(
+        topic, times_s - times_s[0], np.asarray(starts)[order], np.asarray(steps)[order],
+        [ranges[i] for i in order], [limits[i] for i in order],
+    )
+
+
+def _choose_topic(path: Path, reader: Any, topic: str | None) -> str:
+    summary = reader.get_summary()
+    if summary is None:
+        raise UserError(f"{path.name}: no summary section (an unfinished recording?)")
+    scans = sorted(
+        channel.topic for channel in summary.channels.values()
+        if channel.schema_id in summary.schemas and summary.schemas[channel.schema_id].name in LASERSCAN_SCHEMAS
+    )
+    if topic is None:
+        if len(scans) != 1:
+            raise UserError(f"{path.name}: --topic: choose one of the LaserScan topics: {', '.join(scans) or 'none'}")
+        return scans[0]
+    if topic not in scans:
+        raise UserError(f"{path.name}: --topic {topic}: not a LaserScan topic (LaserScan topics: {', '.join(scans) or 'none'})")
+    return topic
+
+
+def _resample(scans: LaserScans, grid_rad: np.ndarray) -> np.ndarray:
+    """(n, len(grid)) ranges on the device's beams: the nearest recorded beam within half a
+    recorded step (a beam halfway takes the next one), +inf (no echo) where the scan does not reach."""
+    table = np.full((len(scans.ranges_m), len(grid_rad)), np.inf)
+    for row, (ranges, start, step) in enumerate(zip(scans.ranges_m, scans.start_angles_rad, scans.steps_rad)):
+        if ranges.size == 1:
+            index = np.zeros(len(grid_rad), dtype=np.int64)
+            near = np.abs(grid_rad - start) <= 1e-4
+        else:
+            index = np.floor((grid_rad - start) / step + 0.5).astype(np.int64)  # halves go up
+            near = (index >= 0) & (index < ranges.size) & (np.abs(start + index * step - grid_rad) <= abs(step) / 2 + 1e-9)
+        table[row, near] = ranges[index[near]]
+    return table
+
+
+class LaserScanReplay:
+    """A URG-04LX or LMS200 serving a LaserScan topic (module docstring); answers the same
+    calls as the simulated sensors."""
+
+    def __init__(self, scans: LaserScans, model: str, name: str) -> None:
+        self.model, self.name = model, name
+        if model == URG_MODEL:
+            self._grid = urg04lx.step_angles_rad()
+            self.period_s = URG_PERIOD_S
+        elif model == LMS_MODEL:
+            self._grid = np.radians(np.arange(0.0, 180.0 + LMS_GRID_STEP_DEG / 2, LMS_GRID_STEP_DEG) - 90.0)
+            self.period_s = LMS_REVOLUTION_S
+        else:
+            raise UserError(f"unknown model {model!r}")
+        self._clock = ReplayClock(scans.times_s, self.period_s)
+        self._ranges = _resample(scans, self._grid)
+        self._limits = scans.range_limits_m
+
+    def _row(self, time_s: float, unit: str) -> np.ndarray:
+        row = self._clock.row_at(time_s)
+        low, high = self._limits[row]
+        return ranges_to_values(self._ranges[row], self.model, unit, low, high)
+
+    def scan(self, time_s: float, *, start_deg: float = 0.0, step_deg: float = 0.5, count: int = 361, unit: str = "mm") -> Scan:
+        if self.model == URG_MODEL:
+            return Scan(self.name, self.model, time_s, self._grid, self._row(time_s, "mm"), "mm")
+        wanted = np.radians(lms200.device_angles_deg(start_deg, step_deg, count) - 90.0)
+        columns = np.clip(np.round((wanted - self._grid[0]) / np.radians(LMS_GRID_STEP_DEG)).astype(np.int64), 0, len(self._grid) - 1)
+        values = self._row(time_s, unit)[columns]
+        values = np.where(np.abs(self._grid[columns] - wanted) <= 1e-6, values, LMS_NO_ECHO)
+        return Scan(self.name, self.model, time_s, wanted, values, unit)
+
+    def scans(self, times_s: Sequence[float], **request: Any) -> list[Scan]:
+        return [self.scan(time_s, **request) for time_s in times_s]
