@@ -107,11 +107,6 @@ class ScanCache:
         return scan
 
     def request(self, time_s: float, **request: Any) -> Future:
-        """The scan for `request` at `time_s` where devices' scans are computed, without waiting
-        (for viewers while no device asks). On the loop thread, like every call here."""
-        return self._future(time_s, request)
-
-    def request(self, time_s: float, **request: Any) -> Future:
         """The scan for this request as a future (for readers that must not block, like the control API);
         a steady stream of them is foreseen and batched as a device's is."""
         future = self._future(time_s, request)

@@ -301,7 +301,6 @@ class Daemon:
         readies = []
         for ordinal, (spec, addresses) in enumerate(self._plan):
             scans = self.scan_caches[spec.name] = ScanCache(factory(spec), executor, phase=ordinal, observer=self._on_scan)
-            self._caches.append(scans)
             for position, address in enumerate(addresses):
                 device = self._device_factory(spec, scans)
                 session = DeviceSession(
@@ -421,7 +420,7 @@ class Daemon:
             "served": sum(endpoint.clients_served for endpoint in self.endpoints),
             "dropped": sum(link.outbox.dropped for link in links),
             "timers": sum(session.waiting for session in self.sessions),
-            "scan_waits": sum(cache.waits for cache in self._caches),
+            "scan_waits": sum(cache.waits for cache in self.scan_caches.values()),
             "tasks": len(asyncio.all_tasks()),
             "fds": len(os.listdir("/proc/self/fd")),
         }

@@ -102,7 +102,7 @@ class LiveFeed:
 
     def _scan_unread(self) -> None:
         wall = time.monotonic()
-        for name in list(self._caches):
+        for name in list(self._requests):  # the sensors served (a daemon may hold caches for others)
             if wall - self._delivered_at.get(name, -1e9) < IDLE_AFTER_S:
                 continue
             pending = self._pending.get(name)
@@ -116,8 +116,8 @@ class LiveFeed:
     def _request_idle_scan(self, name: str) -> None:
         """On the loop: ask the sensor's cache for its configured scan now."""
         try:
-            future = self._caches[name].request(self._now(), **self._requests.get(name, {}))
-        except RuntimeError:  # the scan executor has shut down
+            future = self._caches[name].request(self._now(), **self._requests[name])
+        except (KeyError, RuntimeError):  # not started yet, or the scan executor has shut down
             return
         self._pending[name] = future
         future.add_done_callback(self._idle_done)
