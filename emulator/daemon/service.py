@@ -278,7 +278,6 @@ class Daemon:
         self._scan_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="scan")
         self._workers = workers if sensor_factory is None else 0  # a supplied scan source stays in-process
         self.pool: WorkerPool | None = None
-        self._caches: list[ScanCache] = []
         # The world in this process (scans on the scan thread), or only the live changes'
         # record (scans in workers, each applying the same events to its own world).
         self.world = World(scene) if sensor_factory is None and self._workers <= 0 else None
