@@ -734,6 +734,9 @@ def _pose_keyframes(table: _Table, pose: Pose) -> Keyframes:
             got = f"{len(row)} numbers" if isinstance(row, list) else _show(row)
             raise row_place.error(f"expected {wanted}, got {got}")
         numbers = [_as_number(item, row_place.index(column)) for column, item in enumerate(row)]
+        for column in range(1, 3 if len(row) == PLANAR_ROW else 4):  # x, y (, z)
+            if abs(numbers[column]) > MAX_EXTENT_M:
+                raise row_place.index(column).error(f"must lie within ±{MAX_EXTENT_M:g}, got {_show(row[column])}")
         if rows and numbers[0] < rows[-1][0]:
             raise row_place.index(0).error(f"keyframe times must not decrease, got {_show(row[0])} after {_show(raw[position - 1][0])}")
         rows.append(numbers)
@@ -786,6 +789,8 @@ def _tum_file(path: Path, place: _Place) -> Keyframes:
             raise place.error(f"{where}: not a number: {_show(bad[:20])}") from None
         if not all(math.isfinite(value) for value in values):
             raise place.error(f"{where}: numbers must be finite")
+        if max(abs(value) for value in values[1:4]) > MAX_EXTENT_M:
+            raise place.error(f"{where}: x y z must lie within ±{MAX_EXTENT_M:g}")
         if math.hypot(*values[4:8]) < 1e-9:
             raise place.error(f"{where}: quaternion qx qy qz qw must not be zero")
         if rows and values[0] < rows[-1][0]:

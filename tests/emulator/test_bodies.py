@@ -49,6 +49,8 @@ ERRORS = [
      "bodies[0].trajectory.keyframes[1]: expected 4 numbers like row 0, got 7 numbers"),
     (ROBOT + 'trajectory = { keyframes = [[0, 0, "x", 0]] }\n' + RIDER,
      'bodies[0].trajectory.keyframes[0][2]: expected a number, got "x"'),
+    (ROBOT + "trajectory = { keyframes = [[0, 1e300, 0, 0]] }\n" + RIDER,
+     "bodies[0].trajectory.keyframes[0][1]: must lie within ±100000, got 1e+300"),
     (ROBOT + "trajectory = { keyframes = [] }\n" + RIDER,
      "bodies[0].trajectory.keyframes: expected a non-empty list of [t, x, y, yaw_deg] or [t, x, y, z, roll_deg, pitch_deg, yaw_deg], got []"),
     (ROBOT + 'trajectory = "dead"\n' + RIDER,
@@ -76,6 +78,7 @@ TUM_ERRORS = [
     ("0 0 0 0 0 0 0 1\n1 0 0 nan 0 0 0 1\n", "run.tum line 2: numbers must be finite"),
     ("2 0 0 0 0 0 0 1\n1 0 0 0 0 0 0 1\n", "run.tum line 2: times must not decrease, got 1 after 2"),
     ("0 0 0 0 0 0 0 0\n", "run.tum line 1: quaternion qx qy qz qw must not be zero"),
+    ("0 0 0 2e5 0 0 0 1\n", "run.tum line 1: x y z must lie within ±100000"),
     ("# nothing\n", "run.tum holds no pose (lines 't x y z qx qy qz qw')"),
     (b"0 0 0 0 0 0 0 1\n\xff\n", "run.tum: not UTF-8 text (byte 16)"),
 ]
