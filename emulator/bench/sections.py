@@ -19,6 +19,8 @@ object and `lines` are printed in the table. Add a section by adding it to `SECT
   (`transport_latency`).
 - lms-rates: LMS200 scans/s per baud and resolution through a served daemon
   (`lms_rates`).
+- control: live control through a served daemon (`control_latency`): change →
+  first scan showing it, and a 100 Hz pose stream's cost on MD jitter.
 - memory: peak resident set size of this process (last, so it covers the others).
 """
 
@@ -190,6 +192,12 @@ def serve_section(quick: bool) -> Section:
     return bench_section(quick)
 
 
+def control_section(quick: bool) -> Section:
+    from emulator.bench.control_latency import control_bench  # starts a daemon: imported only when run
+
+    return control_bench(quick)
+
+
 def memory_section(quick: bool) -> Section:
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
     return {"peak_rss_mb": peak_mb}, [f"memory: peak RSS {peak_mb:.1f} MB (this process)"]
@@ -201,5 +209,6 @@ SECTIONS: dict[str, Callable[[bool], Section]] = {
     "transport": transport_section,
     "lms-rates": lms_rates_section,
     "serve": serve_section,
+    "control": control_section,
     "memory": memory_section,
 }

@@ -55,6 +55,10 @@ class ScanFeed:
     def spec(self, name: str) -> SensorSpec | None:
         return next((spec for spec in self._daemon.scene.sensors if spec.name == name), None)
 
+    def serves(self, name: str) -> bool:
+        """Whether this daemon computes the sensor's scans (a fleet's daemon serves only its group)."""
+        return name in self._daemon.scan_caches
+
     async def latest(self, name: str) -> dict[str, Any]:
         """The sensor's latest completed scan (at the last period boundary at or before now), as JSON."""
         spec = self.spec(name)

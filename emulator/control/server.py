@@ -179,10 +179,17 @@ class ControlServer:
 
     async def _scan(self, request: web.Request) -> web.Response:
         name = request.match_info["name"]
+        self._check_sensor(name)
+        return web.json_response(await self.feed.latest(name))
+
+    def _check_sensor(self, name: str) -> None:
+        """404 for a name the scene lacks, 409 for a sensor of the scene this daemon does not serve."""
+        shown = json.dumps(name)[:60]
         if self.feed.spec(name) is None:
             known = ", ".join(spec.name for spec in self.session.scene.sensors)
-            raise ControlError(404, f"no sensor named {json.dumps(name)} (known: {known})", f"sensors[{name}]")
-        return web.json_response(await self.feed.latest(name))
+            raise ControlError(404, f"no sensor named {shown} (known: {known})", f"sensors[{name[:60]}]")
+        if not self.feed.serves(name):
+            raise ControlError(409, f"sensor {shown} is not served by this daemon (see --sensors)", f"sensors[{name}]")
 
     async def _websocket(self, request: web.Request) -> web.WebSocketResponse:
         socket = web.WebSocketResponse(max_msg_size=MAX_BODY_BYTES, heartbeat=None)
@@ -225,9 +232,7 @@ class ControlServer:
         if not isinstance(names, list) or not all(isinstance(name, str) for name in names):
             raise ControlError(400, "subscribe: expected a list of sensor names", "subscribe")
         for name in names:
-            if self.feed.spec(name) is None:
-                known = ", ".join(spec.name for spec in self.session.scene.sensors)
-                raise ControlError(404, f"no sensor named {json.dumps(name)[:60]} (known: {known})", f"sensors[{name[:60]}]")
+            self._check_sensor(name)
         self.feed.unsubscribe(client.offer)
         for name in names:
             self.feed.subscribe(name, client.offer)

@@ -86,6 +86,8 @@ class ScanCache:
         self._strides: dict[RequestKey, float] = {}
         self._observer = observer  # told of each scan handed to a device (once per instant): must return at once
         self._observed_tick: int | None = None
+        # scans dropped by a live change whose old job is still under way (`invalidate_from`)
+        self._outdated: dict[tuple, Future] = {}
 
     def __call__(self, time_s: float, **request: Any) -> Scan:
         """What a device calls: the scan for this request (computed now, alone, if not foreseen)."""
@@ -118,23 +120,43 @@ class ScanCache:
         return self._futures.get(_cache_key(time_s, request)) is future
 
     def invalidate_from(self, time_s: float) -> None:
-        """Drop every scan kept or foreseen at or after `time_s` (the world changed from then on) and
-        compute them again, in one job per request, so scans foreseen stay ready when asked for."""
+        """Drop every scan kept or foreseen at or after `time_s` (the world changed from then on).
+
+        Only the earliest dropped scan of each request is started again at once (the one a device
+        may already be waiting for), and only if its old job is finished: a job still under way
+        for it is `outdated`, and the scan is started again once it ends and someone asks
+        (`pending`, `prefetch`). So a stream of changes (a 100 Hz pose stream) keeps at most one
+        job per scan under way instead of queueing one per change. The later scans are computed
+        when foreseen again; the stream's batching resumes from the earliest."""
         first_tick = round(time_s * TICKS_PER_S)
-        stale = [key for key in self._futures if key[0] >= first_tick]
-        again: dict[tuple, list[float]] = {}
-        for key in stale:
-            del self._futures[key]
-            again.setdefault(key[1:], []).append(key[0] / TICKS_PER_S)
-        for shape, times_s in again.items():
-            self._submit_batch(sorted(times_s), dict(shape))
+        earliest: dict[tuple, tuple] = {}
+        for key in [key for key in self._futures if key[0] >= first_tick]:
+            job = self._futures.pop(key)
+            if key[1:] not in earliest or key[0] < earliest[key[1:]][0][0]:
+                earliest[key[1:]] = (key, job)
+        for shape, (key, job) in earliest.items():
+            again_s = key[0] / TICKS_PER_S
+            if self._predicted_until.get(shape, -1.0) >= again_s:
+                self._predicted_until[shape] = again_s
+            if job.done():
+                self._submit_batch([again_s], dict(shape))
+            else:
+                self._outdated[key] = job
+        for key in sorted(self._outdated, key=lambda key: key[0])[: max(0, len(self._outdated) - self._size)]:
+            del self._outdated[key]  # the oldest: long past, no device asks for them any more
 
     def pending(self, time_s: float) -> Future | None:
         """The job computing the last request's scan at `time_s`, if one was started: a daemon
         waits for it (without blocking) before waking the device that will ask for it."""
         if self._last_request is None:
             return None
-        return self._futures.get(_cache_key(time_s, self._last_request))
+        key = _cache_key(time_s, self._last_request)
+        if key not in self._futures and key in self._outdated:  # a live change dropped it
+            outdated = self._outdated[key]
+            if not outdated.done():
+                return outdated  # wait for it to end, then ask again
+            return self._future(time_s, self._last_request)
+        return self._futures.get(key)
 
     def __len__(self) -> int:
         """How many scans (done or under way) the cache holds: at most its size."""
@@ -146,6 +168,9 @@ class ScanCache:
         request = self._last_request
         if request is None:
             return
+        outdated = self._outdated.get(_cache_key(time_s, request))
+        if outdated is not None and not outdated.done():
+            return  # started again once its outdated job ends (`pending`)
         shape = _request_key(request)
         until, stride = self._predicted_until.get(shape), self._strides.get(shape)
         if until is not None and stride is not None and abs(time_s - (until + stride)) <= STRIDE_TOLERANCE_S:
@@ -157,6 +182,7 @@ class ScanCache:
         key = _cache_key(time_s, request)
         future = self._futures.get(key)
         if future is None:
+            self._outdated.pop(key, None)
             future = self._executor.submit(self._sensor.scan, time_s, **request)
             self._store(key, future)
         else:

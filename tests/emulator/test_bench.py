@@ -48,6 +48,10 @@ def test_bench_json_reports_every_bundled_sensor_and_every_section():
     assert report["latency"]["pty"]["p99_ms"] > 0 and report["latency"]["tcp"]["p99_ms"] > 0
     assert report["jitter"]["mean_period_ms"] > 0
     assert all(row["measured_per_s"] > 0 for row in report["lms_scans_per_s"]["rows"])
+    changes = report["change_to_scan"]
+    assert changes["violations"] == 0  # no scan stamped after a change shows the world before it
+    assert 0 <= changes["simulated"]["p50_ms"] <= changes["simulated"]["max_ms"]
+    assert report["control_jitter"]["pose_stream_100hz"]["poses_sent"] > 0
 
 
 def test_bench_table_shows_only_the_chosen_sections():

@@ -307,3 +307,64 @@ def test_a_live_body_moved_by_put_and_by_a_100_hz_websocket_stream_moves_the_sca
     urg = create_sensor(scene, "urg", world_from_args(scene, Args()))
     for scan in scans:  # the replay sees the crate wherever the live session did, beam for beam
         np.testing.assert_array_equal(urg.scan(scan["time_s"]).values, scan["values"], err_msg=f"at {scan['time_s']}")
+
+
+def test_ctl_says_what_went_wrong_in_one_line_and_exits_2(daemon: ServeProcess) -> None:
+    def ctl(*args: str, url: str = daemon.control_url) -> subprocess.CompletedProcess:
+        return subprocess.run([*serve_command(), "ctl", "--url", url, *args], capture_output=True, text=True, timeout=30)
+
+    refused = ctl("set", "region", "room", "density", "-1")
+    assert refused.returncode == 2
+    assert refused.stderr == "lrf-emulator ctl: 400: smoke.regions[room].density: must be >= 0, got -1.0\n"
+    unknown = ctl("plume", "nope", "on")
+    assert unknown.returncode == 2 and unknown.stderr.startswith("lrf-emulator ctl: 404: no plume named \"nope\"")
+    assert ctl("plume", "fire", "wind", "1", "2").returncode == 2
+    nobody = ctl("state", url="http://127.0.0.1:9")
+    assert nobody.returncode == 2 and nobody.stderr.count("\n") == 1 and "cannot reach" in nobody.stderr
+    applied = ctl("plume", "fire", "rate", "12")
+    assert applied.returncode == 0 and '"rate": 12.0' in applied.stdout
+    paused = ctl("clock", "--pause")
+    assert paused.returncode == 0 and json.loads(ctl("state").stdout)["paused"] is True
+    watched = ctl("clock", "--resume"), ctl("watch", "lms", "--count", "2")
+    assert watched[1].returncode == 0 and len(watched[1].stdout.splitlines()) == 2
+    assert " lms " in watched[1].stdout.splitlines()[0]
+
+
+def test_a_fleet_daemon_refuses_scans_of_sensors_it_does_not_serve(room: Path) -> None:
+    with ServeProcess(room, ENDPOINTS[:1], extra_args=("--sensors", "urg", "--control", "127.0.0.1:0")) as daemon:
+        status, answer = call(daemon.control_url, "GET", "/api/sensors/lms/scan")
+        assert status == 409 and "not served by this daemon" in answer["error"]
+        assert call(daemon.control_url, "GET", "/api/sensors/urg/scan")[0] == 200
+
+
+def test_a_paused_clock_stops_the_device_stream_and_resuming_continues_it(daemon: ServeProcess) -> None:
+    url = daemon.control_url
+    host, port = daemon.endpoint("urg", "tcp").address
+    with socket.create_connection((host, port), timeout=5) as client:
+        client.sendall(b"MD0044072501000\n")
+        received = bytearray()
+
+        def messages() -> int:
+            return received.count(b"\n\n")
+
+        def read_for(seconds: float) -> None:
+            client.settimeout(0.05)
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                try:
+                    received.extend(client.recv(1 << 16))
+                except socket.timeout:
+                    pass
+
+        read_for(0.5)
+        assert messages() >= 3  # the echo and a few scans
+        status, answer = call(url, "PATCH", "/api/clock", {"paused": True})
+        assert status == 200
+        read_for(0.3)  # a scan already under way may still arrive
+        paused_at = messages()
+        read_for(1.0)
+        assert messages() == paused_at, "a paused daemon sent scans"
+        call(url, "PATCH", "/api/clock", {"paused": False})
+        read_for(0.5)
+        assert messages() >= paused_at + 3
+        client.sendall(b"QT\n")

@@ -182,3 +182,36 @@ def test_the_wall_clock_is_continuous_when_its_speed_or_pause_changes() -> None:
     assert clock.now() == 4.0
     with pytest.raises(ValueError):
         clock.set(speed=0.0)
+
+
+def test_a_stream_of_changes_keeps_one_job_per_scan_under_way(railway) -> None:
+    """Ten changes while the next scan computes start it again once, when it is asked for, not ten times."""
+    world = World(railway)
+    counting = CountingSensor(railway, world)
+    gate = threading.Event()
+    plain_scans = counting.scans
+
+    def gated_scans(times_s, **request):
+        gate.wait(10)
+        return plain_scans(times_s, **request)
+
+    counting.scans = gated_scans
+    with ThreadPoolExecutor(max_workers=1) as executor:
+        cache = ScanCache(counting, executor)
+        gate.set()
+        cache(0.1)  # one scan computed, the gate open
+        gate.clear()
+        cache.prefetch(0.2)  # the device's next scan: its job waits at the gate
+        for change in range(10):
+            time_s = 0.1 + (change + 1) * 0.005
+            world.apply(RegionChange(time_s, "haze", 0.001 * change))
+            cache.invalidate_from(time_s)
+        waiting = cache.pending(0.2)
+        assert waiting is not None and not waiting.done()  # the outdated job: wait for it, then ask again
+        gate.set()
+        waiting.result(10)
+        fresh = cache.pending(0.2)
+        assert fresh is not waiting
+        np.testing.assert_array_equal(fresh.result(10).values, create_sensor(railway, "urg", world=world).scan(0.2).values)
+        ticks = [round(t * 1e6) for t in counting.instants]
+        assert ticks.count(200_000) == 2, ticks  # the outdated job and one fresh one

@@ -1,0 +1,223 @@
+"""Live control through the real daemon, as a driver sees it (`bench --section control`).
+
+Starts `lrf-emulator serve` on a small room (a URG-04LX facing a wall 2.9 m
+away through a smoke region, and a crate on a live body beside the beam) and
+streams `MD` over TCP, as a driver does, while the control API changes the
+world:
+
+- change → first scan showing it: the region's density is toggled between
+  clear and 0.004 (the URG's straight-ahead beam turns to error 1 and back);
+  for each change, the wall time from sending the PATCH to the arrival of the
+  first scan that shows it, and the simulated time from the change's instant
+  to that scan's time stamp (target: within one scan period, 100 ms). Any
+  scan stamped at or after a change that still shows the old world counts as
+  a violation (there must be none).
+- a 100 Hz pose stream's cost: MD scan-to-scan jitter |Δt − 100 ms| (p99),
+  alone and while a WebSocket client sends 100 poses a second that move the
+  crate in and out of the beam plane (target: p99 still ≤ 2 ms).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import http.client
+import json
+import random
+import tempfile
+import threading
+import time
+from pathlib import Path
+from urllib.parse import urlsplit
+
+import numpy as np
+
+from emulator.bench.serve_process import ServeProcess
+from emulator.bench.transport_latency import JITTER_TARGET_MS, STREAM_COMMAND, _Line
+
+SCAN_PERIOD_MS = 100.0
+FRONT_INDEX = 384 - 44  # step 384 (straight ahead) in an MD 44..725 scan
+DENSE = 0.004  # d·m: 2.9 m of it is 0.0116, past the URG's 0.007 budget
+
+ROOM = """\
+[scene]
+name = "control bench room"
+description = "a URG facing a wall through a smoke region; a crate on a live body"
+seed = 3
+model = "formsma2011"
+
+[[objects]]
+name = "front wall"
+box = { size = [0.2, 10.0, 3.0] }
+position = [3.0, 0.0, 1.5]
+
+[[smoke.regions]]
+name = "room"
+box = { size = [5.8, 9.8, 2.9] }
+position = [0.0, 0.0, 1.5]
+density = 0.0
+
+[[bodies]]
+name = "robot"
+position = [1.5, 2.0, 0.0]
+trajectory = "live"
+
+[[objects]]
+name = "crate"
+body = "robot"
+box = { size = [0.3, 0.3, 1.0] }
+position = [0.0, 0.0, 0.5]
+
+[[sensors]]
+name = "urg"
+model = "urg-04lx"
+position = [0.0, 0.0, 0.3]
+"""
+
+
+def _decode_md(message: bytes) -> tuple[int, np.ndarray]:
+    """(time stamp ms, values) of one MD scan message (3-character encoding)."""
+    lines = message.split(b"\n")
+    stamp = 0
+    for char in lines[2][:-1]:
+        stamp = (stamp << 6) | (char - 0x30)
+    data = np.frombuffer(b"".join(line[:-1] for line in lines[3:] if line), dtype=np.uint8).astype(np.int64) - 0x30
+    triples = data[: len(data) // 3 * 3].reshape(-1, 3)
+    return stamp, (triples[:, 0] << 12) | (triples[:, 1] << 6) | triples[:, 2]
+
+
+class _Api:
+    """Keep-alive HTTP to the control API."""
+
+    def __init__(self, url: str) -> None:
+        parts = urlsplit(url)
+        self._connection = http.client.HTTPConnection(parts.hostname, parts.port, timeout=10)
+
+    def patch(self, path: str, body: dict) -> dict:
+        self._connection.request("PATCH", path, json.dumps(body), {"Content-Type": "application/json"})
+        answer = self._connection.getresponse()
+        data = json.loads(answer.read())
+        if answer.status != 200:
+            raise RuntimeError(f"{path}: {answer.status} {data}")
+        return data
+
+    def close(self) -> None:
+        self._connection.close()
+
+
+def change_to_scan(daemon: ServeProcess, changes: int) -> dict:
+    """Toggle the density `changes` times while an MD stream runs; per change, wall and simulated latency."""
+    line = _Line(daemon.endpoint("urg", "tcp").uri)
+    api = _Api(daemon.control_url)
+    buffer = bytearray()
+    wall_ms, sim_ms, violations = [], [], 0
+    try:
+        line.write(STREAM_COMMAND)
+        line.read_message(buffer)
+        for _ in range(3):
+            line.read_message(buffer)
+        dense = False
+        for _ in range(changes):
+            time.sleep(random.uniform(0.05, 0.25))  # changes land at every phase of the scan period
+            dense = not dense
+            sent = time.perf_counter()
+            applied = api.patch("/api/smoke/regions/room", {"density": DENSE if dense else 0.0})["applied"]
+            change_ms = applied["t"] * 1000.0
+            while True:
+                message, arrived = line.read_message(buffer)
+                stamp, values = _decode_md(message)
+                shows = (values[FRONT_INDEX] == 1) == dense
+                if stamp >= change_ms and not shows:
+                    violations += 1
+                if shows and stamp >= change_ms:
+                    wall_ms.append((arrived - sent) * 1000.0)
+                    sim_ms.append(stamp - change_ms)
+                    break
+        line.write(b"QT\n")
+    finally:
+        line.close()
+        api.close()
+    return {"changes": changes, "wall": _percentiles(wall_ms), "simulated": _percentiles(sim_ms), "violations": violations}
+
+
+def _percentiles(values: list[float]) -> dict[str, float]:
+    data = np.asarray(values)
+    return {key: round(float(np.percentile(data, q)), 3) for key, q in (("p50_ms", 50), ("p99_ms", 99))} | {
+        "max_ms": round(float(data.max()), 3)
+    }
+
+
+def jitter_with_pose_stream(daemon: ServeProcess, scans: int, stream: bool) -> dict:
+    """MD scan-to-scan jitter over `scans` scans, with or without a 100 Hz WebSocket pose stream."""
+    stop = threading.Event()
+    sent = [0]
+    thread = threading.Thread(target=lambda: asyncio.run(_pose_stream(daemon.control_url, stop, sent)), daemon=True)
+    if stream:
+        thread.start()
+        time.sleep(0.5)
+    line = _Line(daemon.endpoint("urg", "tcp").uri)
+    buffer = bytearray()
+    try:
+        line.write(STREAM_COMMAND)
+        line.read_message(buffer)
+        arrivals = [line.read_message(buffer)[1] for _ in range(scans + 1)]
+        line.write(b"QT\n")
+    finally:
+        line.close()
+        stop.set()
+        if stream:
+            thread.join(5)
+    periods_ms = np.diff(arrivals) * 1000
+    deviations = np.abs(periods_ms - SCAN_PERIOD_MS)
+    return {
+        "scans": scans,
+        "poses_sent": sent[0],
+        "p99_ms": round(float(np.percentile(deviations, 99)), 3),
+        "max_ms": round(float(deviations.max()), 3),
+    }
+
+
+async def _pose_stream(url: str, stop: threading.Event, sent: list[int]) -> None:
+    """100 poses a second on one WebSocket: the crate sweeps across the URG's field of view."""
+    import aiohttp
+
+    async with aiohttp.ClientSession() as session:
+        async with session.ws_connect(url + "/api/ws") as ws:
+            reader = asyncio.ensure_future(_drain(ws))
+            start = time.monotonic()
+            while not stop.is_set():
+                y = 1.5 * np.sin(2 * np.pi * 0.5 * sent[0] / 100.0)
+                await ws.send_str(json.dumps({"op": "pose", "name": "robot", "position": [1.5, float(y), 0.0], "yaw_deg": 0}))
+                sent[0] += 1
+                await asyncio.sleep(max(0.0, start + sent[0] / 100.0 - time.monotonic()))
+            reader.cancel()
+
+
+async def _drain(ws) -> None:
+    async for _ in ws:  # state messages: read and forget, as a live view would
+        pass
+
+
+def control_bench(quick: bool = False) -> tuple[dict, list[str]]:
+    """The `bench` section. Returns (data for JSON, table lines)."""
+    changes, scans = (6, 20) if quick else (60, 300)
+    with tempfile.TemporaryDirectory(prefix="lrf-bench-control-") as folder:
+        scene = Path(folder) / "room.toml"
+        scene.write_text(ROOM)
+        with ServeProcess(scene, ["urg=tcp:127.0.0.1:0"]) as daemon:
+            latency = change_to_scan(daemon, changes)
+            alone = jitter_with_pose_stream(daemon, scans, stream=False)
+            streamed = jitter_with_pose_stream(daemon, scans, stream=True)
+    data = {"change_to_scan": latency, "control_jitter": {"alone": alone, "pose_stream_100hz": streamed}}
+    wall, sim = latency["wall"], latency["simulated"]
+    lines = [
+        f"change → first MD scan showing it ({changes} density changes), target: within one scan period (100 ms)",
+        f"  simulated (scan stamp − change instant) p50 {sim['p50_ms']:.1f} ms   p99 {sim['p99_ms']:.1f} ms"
+        f"   max {sim['max_ms']:.1f} ms   scans after a change showing the old world: {latency['violations']}",
+        f"  wall (PATCH sent → scan received)       p50 {wall['p50_ms']:.1f} ms   p99 {wall['p99_ms']:.1f} ms"
+        f"   max {wall['max_ms']:.1f} ms",
+        f"MD jitter |Δt − 100 ms| over {scans} scans, target p99 ≤ {JITTER_TARGET_MS:g} ms",
+        f"  alone                     p99 {alone['p99_ms']:.3f} ms   max {alone['max_ms']:.3f} ms",
+        f"  with a 100 Hz pose stream p99 {streamed['p99_ms']:.3f} ms   max {streamed['max_ms']:.3f} ms"
+        f"   ({streamed['poses_sent']} poses sent)",
+    ]
+    return data, lines
