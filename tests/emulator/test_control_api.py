@@ -145,7 +145,8 @@ def test_a_slow_websocket_client_is_dropped_and_others_keep_their_scans(daemon: 
 
 def test_the_token_rule(room: Path) -> None:
     result = subprocess.run(
-        [*serve_command(), "serve", str(room), "--control", "0.0.0.0:0"], capture_output=True, text=True, timeout=60
+        [*serve_command(), "serve", str(room), "--endpoint", ENDPOINTS[0], "--control", "0.0.0.0:0"],
+        capture_output=True, text=True, timeout=60,
     )
     assert result.returncode == 2
     assert result.stderr.count("\n") == 1 and "--control-token" in result.stderr
