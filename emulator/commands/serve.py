@@ -53,7 +53,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="append",
         default=[],
         metavar="SENSOR=URI",
-        help="serve SENSOR on URI (pty:PATH or tcp:HOST:PORT) instead of its scene endpoints; repeatable",
+        help="serve SENSOR on URI (pty:PATH, tcp:HOST:PORT or rfc2217:HOST:PORT) instead of its scene endpoints; repeatable",
     )
     parser.add_argument("--speed", type=float, default=1.0, help="simulated seconds per wall second (default 1)")
     parser.add_argument(

@@ -42,11 +42,12 @@ from emulator.daemon.workers import ScanJobFailed, WorkerPool
 from emulator.errors import UserError
 from emulator.optics import World
 from emulator.scene.live import ClockChange, LiveEvent, LiveState, event_record
-from emulator.scene.endpoints import Address, PtyAddress, plan_endpoints
+from emulator.scene.endpoints import Address, PtyAddress, Rfc2217Address, plan_endpoints
 from emulator.scene.model import Scene, SensorSpec
 from emulator.sensors import create_sensor
 from emulator.sensors.scan import Scan
 from emulator.transport.pty import PtyEndpoint
+from emulator.transport.rfc2217 import Rfc2217Endpoint
 from emulator.transport.tcp import TcpEndpoint
 from emulator.transport.timer import PreciseTimer, shared_timer
 from protocols.device import Device, Output
@@ -349,7 +350,8 @@ class Daemon:
             slave = endpoint.open(loop)
             uri, detail = str(address), slave
         else:
-            endpoint = TcpEndpoint(address, session)
+            kind = Rfc2217Endpoint if isinstance(address, Rfc2217Address) else TcpEndpoint
+            endpoint = kind(address, session)
             uri, detail = str(endpoint.open(loop)), None
         session.endpoint = endpoint
         self.endpoints.append(endpoint)

@@ -61,7 +61,7 @@ class TcpEndpoint(ClientSlot):
             raise UserError(f"{self.address}: {error.strerror}") from None
         listener.setblocking(False)
         self._listener = listener
-        self.bound = TcpAddress(self.address.host, listener.getsockname()[1])
+        self.bound = type(self.address)(self.address.host, listener.getsockname()[1])
         loop.add_reader(listener.fileno(), self._accept)
         return self.bound
 
@@ -86,6 +86,10 @@ class TcpEndpoint(ClientSlot):
         client.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
         client.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER_BYTES)
         self._client = client
+        self._attach(client)
+
+    def _attach(self, client: socket.socket) -> None:
+        """Wire an accepted client to the session (RFC 2217 adds its telnet layer here)."""
         self._connect(
             self._loop,
             client.fileno(),

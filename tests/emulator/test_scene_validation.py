@@ -131,6 +131,8 @@ CASES = [
     ],
     (URG + 'endpoints = ["tcp:127.0.0.1:10940"]\n' + LMS + 'endpoints = ["tcp:127.0.0.1:10940"]',
      'sensors[1].endpoints[0]: endpoint "tcp:127.0.0.1:10940" already used by sensor "urg"'),
+    (URG + 'endpoints = ["tcp:127.0.0.1:10940"]\n' + LMS + 'endpoints = ["rfc2217:127.0.0.1:10940"]',
+     'sensors[1].endpoints[0]: endpoint "rfc2217:127.0.0.1:10940" already used by sensor "urg" as "tcp:127.0.0.1:10940"'),
     (URG + 'endpoints = ["pty:ttyA"]\n' + LMS + 'endpoints = ["pty:/dev/null", "pty:./ttyA"]',
      'sensors[1].endpoints[1]: endpoint "pty:./ttyA" already used by sensor "urg" as "pty:ttyA"'),
     (URG + 'endpoints = ["tcp:LocalHost:1", "tcp:localhost:1"]',
