@@ -45,7 +45,10 @@ def test_bench_json_reports_every_bundled_sensor_and_every_section():
     assert report["ratio"] > 0
     assert report["peak_rss_mb"] > 0
     # the sections measured through a served daemon
-    assert report["latency"]["pty"]["p99_ms"] > 0 and report["latency"]["tcp"]["p99_ms"] > 0
+    for timing in ("fast", "real"):
+        assert report["latency"][timing]["pty"]["p99_ms"] > 0 and report["latency"][timing]["tcp"]["p99_ms"] > 0
+    # the real unit's command cycle: commands spread over it wait up to 100 ms, fast ones do not
+    assert report["latency"]["real"]["tcp"]["max_ms"] > 30 > report["latency"]["fast"]["tcp"]["p50_ms"]
     assert report["jitter"]["mean_period_ms"] > 0
     assert all(row["measured_per_s"] > 0 for row in report["lms_scans_per_s"]["rows"])
     changes = report["change_to_scan"]
