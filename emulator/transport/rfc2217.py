@@ -29,6 +29,7 @@ from emulator.transport.tcp import TcpEndpoint
 from protocols.device import Output
 
 DEFAULT_BAUD = 9600  # what a client that asks before setting one is told, for an unpaced device
+MAX_SUBOPTION_BYTES = 64  # the longest COM-PORT-OPTION is 6; a longer one is hostile and dropped
 
 
 @dataclass
@@ -94,6 +95,8 @@ class Rfc2217Endpoint(TcpEndpoint):
         if IAC not in received and manager.mode == M_NORMAL and manager.suboption is None:
             return received
         data = b"".join(manager.filter(received))
+        if manager.suboption is not None and len(manager.suboption) > MAX_SUBOPTION_BYTES:
+            manager.suboption, manager.mode = None, M_NORMAL  # never buffer an endless subnegotiation
         if not data:
             raise BlockingIOError
         return data

@@ -77,3 +77,21 @@ def test_rfc2217_endpoint_serves_the_urg_too(tmp_path: Path) -> None:
         finally:
             port.close()
     assert reply.startswith(b"VV\n00P\nVEND:Hokuyo")
+
+
+def test_an_endless_telnet_subnegotiation_is_not_buffered(tmp_path: Path) -> None:
+    """Hostile input at bounded cost: IAC SB followed by megabytes without IAC SE."""
+    import socket
+
+    with ServeProcess("railway", ["urg=rfc2217:127.0.0.1:0", f"lms=pty:{tmp_path / 'lms'}"]) as daemon:
+        address = daemon.endpoint("urg", "rfc2217").address
+        with socket.create_connection(address, timeout=5) as client:
+            client.sendall(b"\xff\xfa\x2c" + b"x" * 2_000_000)
+            client.sendall(b"\nVV\n")  # the x's after the dropped subnegotiation are one overlong line
+            received = b""
+            while b"VV\n00P" not in received:
+                chunk = client.recv(65536)
+                assert chunk, "connection closed"
+                received += chunk
+        rss_kib = int(next(line for line in open(f"/proc/{daemon.pid}/status") if line.startswith("VmRSS")).split()[1])
+    assert rss_kib < 400_000
