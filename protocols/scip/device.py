@@ -48,6 +48,10 @@ TIMINGS = ("real", "fast")
 # the unit answers commands, so a GD that arrives just after a reply still gets the
 # next revolution (back-to-back GDs: stamps 100 ms apart).
 MEASUREMENT_START_S = 0.006
+# Commands waiting for their cycle: a client that sends more without reading the
+# replies overruns the unit's input buffer; further lines are lost (bounded memory and
+# work under a flood).
+MAX_QUEUED_COMMANDS = 32
 _EPSILON_S = 1e-9
 
 # command → parameter characters before the optional ;tag
@@ -141,6 +145,7 @@ class UrgDevice:
         self._queue: deque[_Command | _ScanReply] = deque()
         self._handled_until = -math.inf  # replies leave in command order
         self._last_polled_scan = -1  # the newest scan a GD/GS has reported
+        self.lost_commands = 0  # lines dropped because MAX_QUEUED_COMMANDS were waiting
         self._power_on_settings()
 
     # --- protocols.device.Device -------------------------------------------
@@ -154,7 +159,10 @@ class UrgDevice:
         """Queue each complete line for its command cycle; whatever is due by `now`."""
         due = now if self._fast else _next_cycle_point(now)
         for line in self._lines.feed(data):
-            self._queue.append(_Command(due, line, now))
+            if len(self._queue) < MAX_QUEUED_COMMANDS:
+                self._queue.append(_Command(due, line, now))
+            else:
+                self.lost_commands += 1
         return self.poll(now)
 
     def poll(self, now: float) -> list[Output]:

@@ -125,3 +125,15 @@ def test_md_acknowledges_at_the_cycle_point_and_streams_the_revolutions_after(de
 def test_unknown_timing_is_rejected():
     with pytest.raises(ValueError, match="timing"):
         UrgDevice(ramp_source, timing="slow")
+
+
+def test_a_flood_of_commands_is_bounded(device):
+    """A client that sends thousands of GDs without reading: at most 32 wait, the rest are lost."""
+    answer(device, b"BM", 0.95)
+    device.receive(b"GD0044072501\n" * 5000, 1.001)
+    assert device.lost_commands == 5000 - 32
+    replies, now = 0, 1.001
+    while device.next_deadline() is not None:
+        now = device.next_deadline()
+        replies += len(device.poll(now))
+    assert replies == 32 and now == pytest.approx(4.2)  # one fresh revolution each
