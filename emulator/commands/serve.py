@@ -40,6 +40,7 @@ from emulator.daemon.service import Daemon, Ready
 from emulator.errors import UserError
 from emulator.recording.world_snapshot import SceneSnapshots
 from emulator.scene import Scene
+from emulator.transport.tcp import IDLE_TIMEOUT_S
 from emulator.view.feed import LiveFeed
 
 SWITCH_INTERVAL_S = 0.0005
@@ -76,6 +77,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=float,
         metavar="UNIX_TIME",
         help="simulated time = (now − UNIX_TIME) × speed, so daemons given one epoch agree (default: start at 0)",
+    )
+    parser.add_argument(
+        "--idle-timeout", type=float, default=IDLE_TIMEOUT_S, metavar="S",
+        help=f"a TCP client with no byte either way for S seconds gives way to a newcomer (default {IDLE_TIMEOUT_S:g})",
     )
     parser.add_argument(
         "--workers",
@@ -115,6 +120,8 @@ def run(args: argparse.Namespace) -> int:
     scene = scene_from_args(args)
     sensors = served_sensors(scene, args.sensors)
     refuse_nothing_to_serve(scene, overrides, sensors)
+    if not (math.isfinite(args.idle_timeout) and args.idle_timeout > 0):
+        raise UserError(f"--idle-timeout must be a finite number of seconds > 0, got {args.idle_timeout}")
     if args.workers is not None and args.workers < 0:
         raise UserError(f"--workers must be >= 0, got {args.workers}")
     workers = args.workers if args.workers is not None else os.cpu_count() or 1
@@ -129,7 +136,8 @@ def run(args: argparse.Namespace) -> int:
     check_exposure(control, args.control_token)
     replayed = read_events(args.events_in, scene) if args.events_in is not None else []
     watching.feed = LiveFeed(clock.now)
-    daemon = Daemon(scene, overrides, clock, sensors=sensors, workers=workers, on_scan=watching.feed.scan_delivered)
+    daemon = Daemon(scene, overrides, clock, sensors=sensors, workers=workers, on_scan=watching.feed.scan_delivered,
+                    idle_timeout_s=args.idle_timeout)
     session = LiveSession(daemon, EventWriter(args.events) if args.events is not None else None)
     watching.prepare(daemon, sensors, args.control_token)
     try:

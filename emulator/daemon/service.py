@@ -48,7 +48,7 @@ from emulator.sensors import create_sensor
 from emulator.sensors.scan import Scan
 from emulator.transport.pty import PtyEndpoint
 from emulator.transport.rfc2217 import Rfc2217Endpoint
-from emulator.transport.tcp import TcpEndpoint
+from emulator.transport.tcp import IDLE_TIMEOUT_S, TcpEndpoint
 from emulator.transport.timer import PreciseTimer, shared_timer
 from protocols.device import Device, Output
 from protocols.lms2xx import Lms200Device
@@ -266,8 +266,10 @@ class Daemon:
         workers: int = 0,
         sensors: Sequence[str] | None = None,
         on_scan: ScanObserver | None = None,
+        idle_timeout_s: float = IDLE_TIMEOUT_S,
     ) -> None:
         self.scene = scene
+        self.idle_timeout_s = idle_timeout_s
         self.clock = clock or WallClock()
         self.sessions: list[DeviceSession] = []
         self.endpoints: list[PtyEndpoint | TcpEndpoint] = []
@@ -351,7 +353,7 @@ class Daemon:
             uri, detail = str(address), slave
         else:
             kind = Rfc2217Endpoint if isinstance(address, Rfc2217Address) else TcpEndpoint
-            endpoint = kind(address, session)
+            endpoint = kind(address, session, idle_timeout_s=self.idle_timeout_s)
             uri, detail = str(endpoint.open(loop)), None
         session.endpoint = endpoint
         self.endpoints.append(endpoint)

@@ -66,11 +66,16 @@ class Link:
         self._open = True
         self._unfed = memoryview(b"")  # read but not yet given to the session
         self._feeding: asyncio.Handle | None = None
+        self.last_activity = loop.time()  # a byte read from or written to the client
         loop.add_reader(fd, self._on_readable)
 
     @property
     def is_open(self) -> bool:
         return self._open
+
+    def idle_for(self) -> float:
+        """Seconds since a byte last went either way."""
+        return self._loop.time() - self.last_activity
 
     def send(self, outputs: list[Output]) -> None:
         if not self._open:
@@ -112,6 +117,7 @@ class Link:
         if not data:
             self._lost()
             return
+        self.last_activity = self._loop.time()
         if not self._accepts_input():
             self.discarded_input += len(data)
             return
@@ -167,6 +173,8 @@ class Link:
                 self._lost()
                 return
             self.outbox.consume(written)
+            if written > 0:
+                self.last_activity = now
             if written < len(data):
                 self._loop.add_writer(self._fd, self._on_writable)
                 self._waiting_writable = True

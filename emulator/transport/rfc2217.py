@@ -25,7 +25,7 @@ from emulator.scene.endpoints import Rfc2217Address
 from emulator.transport import Session
 from emulator.transport.link import READ_SIZE
 from emulator.transport.outbox import DEFAULT_LIMIT_BYTES
-from emulator.transport.tcp import TcpEndpoint
+from emulator.transport.tcp import IDLE_TIMEOUT_S, TcpEndpoint
 from protocols.device import Output
 
 DEFAULT_BAUD = 9600  # what a client that asks before setting one is told, for an unpaced device
@@ -61,8 +61,11 @@ class LineSettings:
 class Rfc2217Endpoint(TcpEndpoint):
     """Serves one session on a TCP port speaking RFC 2217."""
 
-    def __init__(self, address: Rfc2217Address, session: Session, *, limit_bytes: int = DEFAULT_LIMIT_BYTES) -> None:
-        super().__init__(address, session, limit_bytes=limit_bytes)
+    def __init__(
+        self, address: Rfc2217Address, session: Session, *, limit_bytes: int = DEFAULT_LIMIT_BYTES,
+        idle_timeout_s: float = IDLE_TIMEOUT_S,
+    ) -> None:
+        super().__init__(address, session, limit_bytes=limit_bytes, idle_timeout_s=idle_timeout_s)
         self.line: LineSettings | None = None
         self._manager: PortManager | None = None
 

@@ -3,7 +3,9 @@
 One client at a time. A second connection while one is open is refused: it
 is accepted and closed at once (the client sees end-of-stream), so a running
 client is never hijacked. A client that has already closed but whose
-end-of-stream is not yet read does not count (a restarting driver gets in). There is no termios: output is paced at each
+end-of-stream is not yet read does not count (a restarting driver gets in),
+nor does one idle for longer than `idle_timeout_s` (no byte either way: a
+half-open peer, or a client that hung): the newcomer takes over. There is no termios: output is paced at each
 Output's baud, and baud commands are followed by the device logically.
 """
 
@@ -22,6 +24,9 @@ from emulator.transport.outbox import DEFAULT_LIMIT_BYTES
 # ahead of a slow client; keep it near a device's own buffering so the outbox
 # drops old scans and the client sees fresh ones.
 SEND_BUFFER_BYTES = 16 * 1024
+# A connection with no byte either way for this long no longer locks others out:
+# a streaming client is never idle, a driver between commands for 30 s is gone or hung.
+IDLE_TIMEOUT_S = 30.0
 
 
 class TcpEndpoint(ClientSlot):
@@ -33,11 +38,14 @@ class TcpEndpoint(ClientSlot):
         session: Session,
         *,
         limit_bytes: int = DEFAULT_LIMIT_BYTES,
+        idle_timeout_s: float = IDLE_TIMEOUT_S,
     ) -> None:
         super().__init__(session, limit_bytes=limit_bytes)
         self.address = address
         self.bound: TcpAddress | None = None
         self.refused = 0
+        self.taken_over = 0  # idle clients replaced by a newcomer
+        self.idle_timeout_s = idle_timeout_s
         self._listener: socket.socket | None = None
         self._client: socket.socket | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -78,9 +86,12 @@ class TcpEndpoint(ClientSlot):
         except (BlockingIOError, InterruptedError, ConnectionAbortedError):
             return
         if self.connected and self._client_still_there():
-            self.refused += 1
-            client.close()
-            return
+            if self.link is None or self.link.idle_for() < self.idle_timeout_s:
+                self.refused += 1
+                client.close()
+                return
+            self.taken_over += 1
+            self._client_left()
         client.setblocking(False)
         client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         client.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)

@@ -236,8 +236,11 @@ class Lms200Device:
 
     def connection_lost(self) -> None:
         """The host went away: stop streaming, back to mode 25. The line rate stays
-        (a real unit does not notice a host disconnect)."""
+        (a real unit does not notice a host disconnect). Output still queued for the
+        line left with the host (the transport discards it), so the line is free: a
+        client that sent 16 000 bad frames must not delay the next one's replies by 16 s."""
         self._reader.clear()
+        self._line_free_at = float("-inf")
         self._stream = None
         self._pending = None
         self._last_output_streamed = False
