@@ -14,8 +14,9 @@ import random
 import re
 import select
 import socket
+import subprocess
+import sys
 import termios
-import threading
 import time
 import tty
 from collections.abc import Callable
@@ -103,33 +104,31 @@ def open_raw(uri: str, baud: int | None = None) -> RawClient:
     return RAW_CLIENTS[scheme](rest, baud)
 
 
-class Flood(threading.Thread):
-    """Writes `burst` to `uri` every `period_s` (0: back to back) until stopped, reading
-    (and counting) whatever comes back unless `reads` is False."""
+BURSTS = {"gd": lambda: GD_FLOOD, "junk": lambda: junk(65536), "bad-lines": lambda: b"X\n" * 32768}
 
-    def __init__(self, uri: str, burst: bytes, *, period_s: float = 0.0, reads: bool = True,
+
+class Flood:
+    """Writes a burst ("gd", "junk", "bad-lines") to `uri` every `period_s` (0: back to back)
+    until stopped, reading whatever comes back unless `reads` is False. It runs in its own
+    process, so that its busy loop takes no interpreter time from the client measuring."""
+
+    def __init__(self, uri: str, burst: str, *, period_s: float = 0.0, reads: bool = True,
                  baud: int | None = None) -> None:
-        super().__init__(daemon=True)
-        self.client = open_raw(uri, baud)
-        self.burst, self.period_s, self.reads = burst, period_s, reads
-        self.sent = 0
-        self._stop_event = threading.Event()
+        self.args = [sys.executable, "-m", "emulator.bench.hostile", uri, burst, str(period_s),
+                     "1" if reads else "0", str(baud or 0)]
+        self.process: subprocess.Popen | None = None
+        self.sent = self.received = 0
 
-    def run(self) -> None:
-        while not self._stop_event.is_set():
-            started = time.monotonic()
-            self.sent += self.client.send(self.burst, timeout_s=0.2)
-            while True:
-                if self.reads:
-                    self.client.drain(0.01)
-                left = self.period_s - (time.monotonic() - started)
-                if left <= 0 or self._stop_event.wait(min(left, 0.01) if not self.reads else 0):
-                    break
+    def start(self) -> None:
+        self.process = subprocess.Popen(self.args, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        if self.process.stdout.readline().strip() != "flooding":
+            raise RuntimeError(f"flood {self.args} did not start")
 
     def stop(self) -> None:
-        self._stop_event.set()
-        self.join(5)
-        self.client.close()
+        """End the flood; `sent` and `received` count its bytes."""
+        assert self.process is not None
+        output, _ = self.process.communicate("stop\n", timeout=10)
+        self.sent, self.received = (int(word) for word in output.split()[:2])
 
     def __enter__(self) -> Flood:
         self.start()
@@ -137,6 +136,25 @@ class Flood(threading.Thread):
 
     def __exit__(self, *exc_info: object) -> None:
         self.stop()
+
+
+def _flood(uri: str, burst_name: str, period_s: float, reads: bool, baud: int | None) -> None:
+    """The flooding process: until a line arrives on stdin; prints 'SENT RECEIVED' at the end."""
+    client, burst, sent = open_raw(uri, baud), BURSTS[burst_name](), 0
+    print("flooding", flush=True)
+    while not select.select([sys.stdin], [], [], 0)[0]:
+        started = time.monotonic()
+        sent += client.send(burst, timeout_s=0.2)
+        while True:
+            if reads:
+                client.drain(0.01)
+            left = period_s - (time.monotonic() - started)
+            if left <= 0:
+                break
+            if not reads:
+                time.sleep(min(left, 0.01))
+    print(sent, client.received, flush=True)
+    client.close()
 
 
 def junk(size: int, seed: int = 17) -> bytes:
@@ -184,3 +202,7 @@ def rss_kib(pid: int) -> int:
     """Resident set size of a process (kB), from /proc."""
     status = Path(f"/proc/{pid}/status").read_text()
     return int(re.search(r"^VmRSS:\s+(\d+)", status, re.MULTILINE).group(1))
+
+
+if __name__ == "__main__":
+    _flood(sys.argv[1], sys.argv[2], float(sys.argv[3]), sys.argv[4] == "1", int(sys.argv[5]) or None)

@@ -61,6 +61,7 @@ DEVICE_OPTIONS: dict[str, tuple[str, ...]] = {
 }
 
 
+MAX_HELD_INPUT_BYTES = 65536  # client input waiting for a scan; beyond, it is discarded (counted)
 RETRY_AFTER_FAILURE_S = 0.1  # a device whose scan failed is polled again this much later (wall)
 
 DeviceFactory = Callable[[SensorSpec, Callable[..., Scan]], Device]
@@ -124,7 +125,11 @@ class DeviceSession:
     schedules the wake-up (default: the loop's own, millisecond-accurate timers).
     `pending(scan_time)` gives the job computing that scan, if any: at its deadline
     the device is woken only once that job is done, so the loop never waits on a
-    computation (the device then finds its scan ready).
+    computation (the device then finds its scan ready). Client bytes likewise:
+    a device that says which scan a request now would read (`latest_scan_time`,
+    e.g. a URG's GD) gets them once that scan is computed; meanwhile they wait,
+    in order, up to MAX_HELD_INPUT_BYTES (a flood of GDs blocked the loop on
+    every new scan and starved the other sensors).
     """
 
     def __init__(
@@ -145,15 +150,45 @@ class DeviceSession:
         self._call_later = call_later or loop.call_later
         self._timer: Cancellable | None = None
         self._prefetch_timer: Cancellable | None = None
+        self._held: bytearray | None = None  # input waiting for the scan it may read
+        self.discarded_input = 0  # held input beyond MAX_HELD_INPUT_BYTES
 
     @property
     def baud(self) -> int | None:
         return self.device.baud
 
     def received(self, data: bytes) -> None:
+        if self._held is not None:
+            room = MAX_HELD_INPUT_BYTES - len(self._held)
+            self._held += data[:room]
+            self.discarded_input += max(0, len(data) - room)
+            return
+        job = self._input_scan_job()
+        if job is not None and not job.done():
+            held = self._held = bytearray(data)
+            job.add_done_callback(lambda _: self._loop.call_soon_threadsafe(self._release, held))
+            return
         self._deliver(self.device.receive(data, self._clock.now()))
 
+    def _input_scan_job(self) -> Future | None:
+        """The job computing the scan a request received now would read, started if need be."""
+        latest_scan_time = getattr(self.device, "latest_scan_time", None)
+        if latest_scan_time is None or self._prefetch is None or self._pending is None:
+            return None
+        time_s = latest_scan_time(self._clock.now())
+        if time_s is None:
+            return None
+        self._prefetch(time_s)
+        return self._pending(time_s)
+
+    def _release(self, held: bytearray) -> None:
+        """The scan held input waited for is ready: hand the input over (unless the client left)."""
+        if self._held is held:
+            self._held = None
+            self.received(bytes(held))
+
     def disconnected(self) -> None:
+        self._held = None
         self.device.connection_lost()
         self._schedule()
 

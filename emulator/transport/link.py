@@ -9,6 +9,7 @@ they differ only in how a client arrives and leaves.
 from __future__ import annotations
 
 import asyncio
+import time
 from typing import Callable
 
 from emulator.transport import Session
@@ -22,6 +23,12 @@ READ_SIZE = 65536
 # reads, timers and writes served in between, and no more is read from the
 # client meanwhile (the kernel's buffers push back on it).
 INPUT_SLICE_BYTES = 512
+# A client's device work (CPU of the loop thread spent on its input) may use at
+# most this share of wall time, with bursts up to INPUT_CPU_BURST_S: a client
+# flooding commands is slowed down (its input waits in the kernel, pushing back
+# on it) instead of starving every other client and sensor of the loop.
+INPUT_CPU_SHARE = 0.05
+INPUT_CPU_BURST_S = 0.005
 
 
 class Link:
@@ -35,7 +42,8 @@ class Link:
 
     Input costs bounded work per loop turn: a read is fed to the session
     INPUT_SLICE_BYTES at a time, one slice per turn, and the client is not read
-    again until its last read is used up. While more replies wait unread than
+    again until its last read is used up; a client whose input has cost more
+    than INPUT_CPU_SHARE of the loop's time waits until it is back within it. While more replies wait unread than
     the outbox holds, input is discarded at no cost beyond counting it, as a
     device whose receive buffer overflows loses bytes.
     """
@@ -65,7 +73,9 @@ class Link:
         self._waiting_writable = False
         self._open = True
         self._unfed = memoryview(b"")  # read but not yet given to the session
-        self._feeding: asyncio.Handle | None = None
+        self._feeding: asyncio.Handle | asyncio.TimerHandle | None = None
+        self._cpu_credit = INPUT_CPU_BURST_S  # loop-thread CPU seconds this client may still spend now
+        self._credit_at = loop.time()
         self.last_activity = loop.time()  # a byte read from or written to the client
         loop.add_reader(fd, self._on_readable)
 
@@ -135,12 +145,21 @@ class Link:
             self.discarded_input += len(piece) + len(self._unfed)
             self._unfed = memoryview(b"")
         else:
+            started = time.thread_time()
             self._session.received(bytes(piece))
+            self._cpu_credit -= time.thread_time() - started
         if not self._open:
             return
-        if self._unfed:
-            self._feeding = self._loop.call_soon(self._feed_slice)
-        else:
+        now = self._loop.time()
+        self._cpu_credit = min(INPUT_CPU_BURST_S, self._cpu_credit + (now - self._credit_at) * INPUT_CPU_SHARE)
+        self._credit_at = now
+        wait_s = max(0.0, -self._cpu_credit / INPUT_CPU_SHARE)
+        step = self._feed_slice if self._unfed else self._resume_reading
+        self._feeding = self._loop.call_later(wait_s, step) if wait_s > 0 else self._loop.call_soon(step)
+
+    def _resume_reading(self) -> None:
+        self._feeding = None
+        if self._open:
             self._loop.add_reader(self._fd, self._on_readable)
 
     def _on_writable(self) -> None:

@@ -224,6 +224,12 @@ class Lms200Device:
         due = [time for time in candidates if time is not None]
         return min(due) if due else None
 
+    def latest_scan_time(self, now: float) -> float:
+        """The full scan a request received at `now` reads (30 01, 37): a daemon computes it
+        before handing the bytes over, so that answering never waits on a computation."""
+        revolutions = self._variant.revolutions
+        return completion_time(latest_complete(now, revolutions), revolutions)
+
     def next_scan_time(self) -> float | None:
         """Simulated time of the scan the next streamed telegram will carry (None when not
         streaming): the newest scan complete when the line frees, so a daemon can compute

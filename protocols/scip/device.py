@@ -192,6 +192,13 @@ class UrgDevice:
             deadlines.append(self._stream.next_index / SCANS_PER_SECOND)
         return min(deadlines, default=None)
 
+
+    def latest_scan_time(self, now: float) -> float | None:
+        """With fast timing, the scan a GD/GS received at `now` reads at once: a daemon
+        computes it before handing the bytes over, so that answering never waits on a
+        computation (with real timing a GD waits for a later scan, a deadline of its own)."""
+        return _latest_scan_index(now) / SCANS_PER_SECOND if self._fast else None
+
     def connection_lost(self) -> None:
         """Streaming stops and unanswered commands are forgotten; the unit keeps
         its settings (SCIP mode, laser, speed, bit rate, timer) as a real one does

@@ -6,12 +6,10 @@ import numpy as np
 import pytest
 
 from emulator.bench.hostile import (
-    GD_FLOOD,
     NOMINAL_SCANS_PER_S,
     RAW_CLIENTS,
     Flood,
     attach_lms,
-    junk,
     lms_command_latencies,
     lms_scan_rate,
     open_raw,
@@ -65,8 +63,7 @@ def test_a_gd_flood_and_junk_leave_the_lms200_stream_its_rate(daemon: ServeProce
     duration_s = 4.0 * SCALE
     with attach_lms(daemon.endpoint("lms", "pty").path) as lms:
         rss_before = rss_kib(daemon.pid)
-        with Flood(daemon.endpoint("urg", "tcp").uri, GD_FLOOD), \
-                Flood(daemon.endpoint("urg", "pty").uri, junk(65536), period_s=1.0):
+        with Flood(daemon.endpoint("urg", "tcp").uri, "gd"), Flood(daemon.endpoint("urg", "pty").uri, "junk", period_s=1.0):
             rate = lms_scan_rate(lms, duration_s)
             latencies = lms_command_latencies(lms, 20)
         rss_after = rss_kib(daemon.pid)

@@ -16,7 +16,7 @@ from emulator.bench.serve_process import ServeProcess, serve_command
 
 def serve_args(tmp_path: Path, *extra: str) -> list[str]:
     return [*serve_command(), "serve", "railway", "--endpoint", f"urg=pty:{tmp_path / 'ttyURG0'}",
-            "--endpoint", f"lms=pty:{tmp_path / 'ttyLMS0'}", *extra]
+            "--endpoint", f"lms=pty:{tmp_path / 'ttyLMS0'}", "--control", "off", "--view", "off", *extra]
 
 
 @pytest.mark.parametrize("signum", [signal.SIGHUP, signal.SIGQUIT, signal.SIGTERM, signal.SIGINT])
