@@ -68,9 +68,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = None
+    hold_stop_signals()
     try:
+        # Modules load while stop signals are only held: trimesh catches BaseException
+        # around its imports and would turn an interrupt there into a later TypeError.
+        parser = build_parser()
         raise_on_stop_signals()
-        args = build_parser().parse_args(argv)
+        args = parser.parse_args(argv)
         return int(args._run(args) or 0)
     except UserError as error:
         if args.debug:

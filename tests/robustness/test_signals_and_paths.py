@@ -29,7 +29,7 @@ def test_every_stop_signal_removes_the_symlinks_and_exits_0(tmp_path: Path, sign
     assert "Traceback" not in daemon.stderr
 
 
-@pytest.mark.parametrize("delay_s", [0.1, 0.4, 0.8, 1.2])
+@pytest.mark.parametrize("delay_s", [0.25, 0.5, 0.8, 1.2])
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
 def test_a_stop_signal_during_start_up_exits_quietly_and_leaves_nothing(
     tmp_path: Path, delay_s: float, signum: int
