@@ -14,7 +14,8 @@ message ends. Over the measuring window:
   within ON_TIME_MS of the slot;
 - CPU per scan: user + system time of the daemon and its worker processes
   from /proc/PID/stat (the process's own accounting), divided by the scans
-  received.
+  received; "of it loop": the daemon's own process (protocols, transports,
+  timers), without its workers.
 
 Every figure is from one run (no best-of-N); the machine's load average is
 reported beside it, as the clients share the machine with the daemon.
@@ -57,10 +58,10 @@ def fleet_scene_text(count: int) -> str:
     return world + "\n".join(sensors)
 
 
-def cpu_seconds(pid: int) -> float:
-    """User + system CPU of process `pid` and of its live child processes (the scan workers)."""
+def cpu_seconds(pid: int, children: bool = True) -> float:
+    """User + system CPU of process `pid` and (unless told not to) of its live child processes (the scan workers)."""
     total = 0.0
-    for process in [pid, *_children(pid)]:
+    for process in [pid, *(_children(pid) if children else [])]:
         try:
             fields = Path(f"/proc/{process}/stat").read_text().rsplit(")", 1)[1].split()
         except OSError:
@@ -118,7 +119,7 @@ def measure_serve(count: int, duration_s: float, workers: int | None = None, mod
     return {"model": model, **_figures(count, duration_s, workers, streams, load)}
 
 
-def _stream_all(daemon: ServeProcess, count: int, duration_s: float) -> tuple[list[_Stream], float]:
+def _stream_all(daemon: ServeProcess, count: int, duration_s: float) -> tuple[list[_Stream], tuple[float, float]]:
     selector = selectors.DefaultSelector()
     streams = []
     for index in range(count):
@@ -129,11 +130,11 @@ def _stream_all(daemon: ServeProcess, count: int, duration_s: float) -> tuple[li
         selector.register(sock, selectors.EVENT_READ, streams[-1])
     started = time.monotonic()
     measure_from, measure_to = started + WARM_UP_S, started + WARM_UP_S + duration_s
-    cpu_before = None
+    cpu_before = loop_before = None
     try:
         while (now := time.monotonic()) < measure_to:
             if cpu_before is None and now >= measure_from:
-                cpu_before = cpu_seconds(daemon.pid)
+                cpu_before, loop_before = cpu_seconds(daemon.pid), cpu_seconds(daemon.pid, children=False)
                 for stream in streams:  # the window starts here: forget the warm-up
                     stream.arrivals.clear()
                     stream.stamps.clear()
@@ -142,7 +143,7 @@ def _stream_all(daemon: ServeProcess, count: int, duration_s: float) -> tuple[li
                 if not data:
                     raise RuntimeError("the daemon closed a stream")
                 key.data.feed(data, time.monotonic())
-        cpu = cpu_seconds(daemon.pid) - (cpu_before or 0.0)
+        cpu = cpu_seconds(daemon.pid) - (cpu_before or 0.0), cpu_seconds(daemon.pid, children=False) - (loop_before or 0.0)
     finally:
         for stream in streams:
             selector.unregister(stream.sock)
@@ -152,7 +153,7 @@ def _stream_all(daemon: ServeProcess, count: int, duration_s: float) -> tuple[li
 
 
 def _figures(count: int, duration_s: float, workers: int | None, measured: tuple[list[_Stream], float], load: tuple) -> dict:
-    streams, cpu = measured
+    streams, (cpu, daemon_cpu) = measured
     received = sum(len(stream.arrivals) for stream in streams)
     due = count * duration_s / SCAN_PERIOD_S
     periods, lateness = [], []
@@ -177,6 +178,7 @@ def _figures(count: int, duration_s: float, workers: int | None, measured: tuple
         "lateness_p99_ms": float(np.percentile(late, 99)),
         "lateness_max_ms": float(np.max(late)),
         "cpu_ms_per_scan": cpu / received * 1000.0 if received else float("nan"),
+        "daemon_cpu_ms_per_scan": daemon_cpu / received * 1000.0 if received else float("nan"),
         "cpu_cores": cpu / duration_s,
         "load_average": [round(value, 2) for value in load],
     }
@@ -187,13 +189,14 @@ def table_lines(rows: list[dict]) -> list[str]:
         "serve: a real daemon streaming N URG-04LX (railway's world) to N TCP clients; one run each, no best-of;"
         f" on time = within {ON_TIME_MS:g} ms of its slot; CPU = daemon + workers (/proc/PID/stat)",
         f"  {'model':<11} {'N':>3} {'workers':>7} {'rate':>7} {'on time':>8} {'jitter p50':>10} {'p99 ms':>7}"
-        f" {'late p99':>8} {'max ms':>7} {'CPU ms/scan':>11} {'cores':>6}  load avg",
+        f" {'late p99':>8} {'max ms':>7} {'CPU ms/scan':>11} {'of it loop':>10} {'cores':>6}  load avg",
     ]
     for row in rows:
         lines.append(
             f"  {row['model']:<11} {row['sensors']:>3} {row['workers']!s:>7} {row['rate']:>7.1%} {row['on_time']:>8.2%}"
             f" {row['jitter_p50_ms']:>10.2f} {row['jitter_p99_ms']:>7.2f} {row['lateness_p99_ms']:>8.2f}"
-            f" {row['lateness_max_ms']:>7.1f} {row['cpu_ms_per_scan']:>11.2f} {row['cpu_cores']:>6.2f}"
+            f" {row['lateness_max_ms']:>7.1f} {row['cpu_ms_per_scan']:>11.2f} {row['daemon_cpu_ms_per_scan']:>10.2f}"
+            f" {row['cpu_cores']:>6.2f}"
             f"  {' '.join(f'{value:g}' for value in row['load_average'])}"
         )
     return lines
