@@ -309,13 +309,32 @@ class WorkerPool:
                 job.future.set_exception(WorkerCrashed(str(error)))
             return
         with self._lock:
+            # the events the dead worker held (or had applied) are all replayed in one job, which
+            # settles the held `apply` jobs when it is done
+            held_applies = [job for job in worker.jobs.values() if job.message[0] == "apply"]
+            worker.jobs = {job_id: job for job_id, job in worker.jobs.items() if job.message[0] != "apply"}
             if self._events:
                 job = next(self._job_ids)
-                worker.jobs[job] = _Job(("apply", job, list(self._events)), Future(), attempts=0)
+                replay = Future()
+                worker.jobs[job] = _Job(("apply", job, list(self._events)), replay, attempts=0)
+                replay.add_done_callback(lambda done: _settle_like(done, [held.future for held in held_applies]))
                 self._send(worker, job)
             for job_id in list(worker.jobs):
                 if worker.jobs[job_id].message[0] != "apply":
                     self._send(worker, job_id)
+
+
+def _settle_like(done: Future, futures: list[Future]) -> None:
+    """Give `futures` the outcome of `done` (a replay standing in for the jobs it covers)."""
+    for future in futures:
+        if future.done():
+            continue
+        if done.cancelled():
+            future.cancel()
+        elif done.exception() is not None:
+            future.set_exception(done.exception())
+        else:
+            future.set_result(done.result())
 
 
 class WorkerExecutor(Executor):

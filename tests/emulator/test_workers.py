@@ -13,6 +13,7 @@ from emulator.daemon.scan_cache import ScanCache
 from emulator.daemon.workers import RemoteSensor, WorkerFailed, WorkerPool
 from emulator.optics import World
 from emulator.scene import load_scene
+from emulator.scene.live import RegionChange, event_record
 from emulator.sensors import create_sensor
 from emulator.sensors.lms200 import configured_window
 
@@ -80,3 +81,23 @@ def test_a_failing_job_fails_with_the_workers_error_and_events_of_unknown_kind_a
         RemoteSensor("urg").scan(1.0)
     applied = pool.apply([])
     assert [future.result(timeout=60) for future in applied] == [0, 0]
+
+
+def test_a_restarted_worker_replays_the_world_events_applied_before_it_died() -> None:
+    """A live change reaches every worker; a worker restarted after it still sees it."""
+    scene = load_scene("railway")
+    change = RegionChange(2.0, "car_end_smoke", 40.0)  # dense smoke in front of both sensors from 2 s on
+    local_world = World(scene)
+    local_world.apply(change)
+    local = create_sensor(scene, "urg", world=local_world)
+    untouched = create_sensor(scene, "urg", world=World(scene))
+    assert not np.array_equal(local.scan(3.0).values, untouched.scan(3.0).values)  # the change shows
+    pool = WorkerPool(scene, [("urg",)], on_restart=lambda line: None)
+    pool.start()
+    try:
+        assert [future.result(timeout=60) for future in pool.apply([event_record(change)])] == [1]
+        os.kill(pool.pids[0], signal.SIGKILL)
+        scan = pool.executor().submit(pool.sensor("urg").scan, 3.0).result(timeout=120)
+        np.testing.assert_array_equal(scan.values, local.scan(3.0).values)
+    finally:
+        pool.close()
