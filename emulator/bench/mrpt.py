@@ -145,7 +145,7 @@ corresponding_points_decimation = 1
 
 [MappingApplication]
 rawlog_file = {rawlog}
-rawlog_offset = 0
+rawlog_offset = {skip}
 logOutput_dir = {output}
 LOG_FREQUENCY = 0
 SAVE_3D_SCENE = 0
@@ -182,12 +182,15 @@ class IcpSlamResult:
     output_dir: Path
 
 
-def icp_slam(rawlog: Path, output_dir: Path, timeout_s: float = 600.0) -> IcpSlamResult:
-    """Run icp-slam on `rawlog`; its path and final point map."""
+def icp_slam(rawlog: Path, output_dir: Path, *, skip: int = 0, timeout_s: float = 600.0) -> IcpSlamResult:
+    """Run icp-slam on `rawlog` from its observation `skip` on; its path (one pose per observation
+    processed) and final point map."""
     slam = program("icp-slam")
     output_dir.mkdir(parents=True, exist_ok=True)
     config = output_dir.parent / f"{output_dir.name}.ini"
-    config.write_text(ICP_SLAM_INI.format(rawlog=rawlog.resolve(), output=output_dir.resolve()))
+    # icp-slam skips entries while its 1-based count of entries read is below rawlog_offset.
+    offset = int(skip) + 1 if skip > 0 else 0
+    config.write_text(ICP_SLAM_INI.format(rawlog=rawlog.resolve(), output=output_dir.resolve(), skip=offset))
     # stdin from /dev/null: it polls the keyboard (Esc stops it) and pauses on an error.
     result = subprocess.run([slam, str(config)], capture_output=True, text=True, timeout=timeout_s,
                             stdin=subprocess.DEVNULL)

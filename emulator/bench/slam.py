@@ -159,15 +159,25 @@ class SlamRun:
     map_points: np.ndarray  # (m, 2) icp-slam's final map, moved into the world frame
 
 
-def slam(recording: Recording, scene: Scene, sensor: str, folder: Path) -> SlamRun:
-    """icp-slam on the recording; its path aligned onto the ground truth."""
-    result = icp_slam(recording.rawlog, folder / "icp-slam")
-    if len(result.path) != len(recording.times_s):
-        raise MrptError(f"icp-slam wrote {len(result.path)} poses for {len(recording.times_s)} scans")
-    kept = ~np.isnan(recording.times_s)
-    if kept.sum() < 2:
-        raise MrptError(f"only {kept.sum()} synchronised scans in {recording.rawlog}")
-    times = recording.times_s[kept]
+def slam(recording: Recording, scene: Scene, sensor: str, folder: Path, *, start_s: float | None = None) -> SlamRun:
+    """icp-slam on the recording (from its first scan at or after simulated `start_s`, if given:
+    the same input however long the driver took to start); its path aligned onto the ground truth."""
+    timed = ~np.isnan(recording.times_s)
+    if timed.sum() < 2:
+        raise MrptError(f"only {timed.sum()} synchronised scans in {recording.rawlog}")
+    skip = 0
+    if start_s is not None:
+        later = np.flatnonzero(timed & (np.nan_to_num(recording.times_s, nan=-np.inf) >= start_s - 1e-6))
+        if len(later) < 2 or recording.times_s[later[0]] > start_s + SCAN_PERIOD_S / 2:
+            first = recording.times_s[timed][0]
+            raise MrptError(f"the recording's first timed scan is at {first:.1f} s, after the start asked ({start_s} s)")
+        skip = int(later[0])
+    result = icp_slam(recording.rawlog, folder / "icp-slam", skip=skip)
+    times_s = recording.times_s[skip:]
+    if len(result.path) != len(times_s):
+        raise MrptError(f"icp-slam wrote {len(result.path)} poses for {len(times_s)} scans")
+    kept = ~np.isnan(times_s)
+    times = times_s[kept]
     truth = sensor_poses_2d(scene, sensor, times)
     error = absolute_trajectory_error(result.path[kept], truth)
     transform = error.transform

@@ -31,7 +31,10 @@ SENSOR = "urg"
 PRESETS = ("formsma2011", "physical")
 SMOKE_SCALES = (0.0, 0.5, 1.0, 2.0, 4.0)
 MAPPED_SCALE = 1.0  # the scene as written: its map is drawn
-SPEED = 2.0
+SPEED = 1.0  # CHokuyoURG takes ~3 s of wall clock to start: at 1x it misses the least of the loop
+START_S = 10.0  # icp-slam starts here in every run, so runs differ by smoke alone (a loaded machine
+# has taken up to 6.7 s to get serve and the driver going)
+ATTEMPTS = 2  # a run whose driver started after START_S is recorded again
 MARKER = "<!-- slam-table -->"
 ESTIMATE_RGB = (0.0, 0.0, 0.0)
 
@@ -61,11 +64,14 @@ HEADER = (
 
 
 def measure(scene_name: str, preset: str, smoke_scale: float, folder: Path, until_s: float) -> tuple[Row, SlamRun]:
-    started = time.monotonic()
-    recording = record(scene_name, SENSOR, folder, until_s=until_s, speed=SPEED,
-                       serve_args=("--model", preset, "--smoke-scale", repr(smoke_scale)))
     scene = scale_smoke(apply_model_override(load_scene(scene_name), preset), smoke_scale)
-    run = slam(recording, scene, SENSOR, folder)
+    for attempt in range(ATTEMPTS):
+        started = time.monotonic()
+        recording = record(scene_name, SENSOR, folder / str(attempt), until_s=until_s, speed=SPEED,
+                           serve_args=("--model", preset, "--smoke-scale", repr(smoke_scale)))
+        if recording.times_s[~np.isnan(recording.times_s)][0] <= START_S or attempt == ATTEMPTS - 1:
+            break
+    run = slam(recording, scene, SENSOR, folder / str(attempt), start_s=START_S)
     row = Row(preset, smoke_scale, len(run.times_s), recording.error_share, run.error.rmse_m, run.error.max_m,
               float(np.degrees(run.error.heading_rmse_rad)), time.monotonic() - started)
     return row, run
@@ -81,10 +87,10 @@ def draw_slam_map(scene_name: str, run: SlamRun, preset: str, smoke_scale: float
 
 
 def loop_end_s(scene_name: str) -> float:
-    """Simulated time the last keyframe is reached, plus the driver's start-up."""
+    """Simulated time the last keyframe is reached, and a little more."""
     scene = load_scene(scene_name)
     ends = [float(body.trajectory.times[-1]) for body in scene.bodies if hasattr(body.trajectory, "times")]
-    return max(ends) + 8.0
+    return max(ends) + 2.0
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -3,92 +3,33 @@
 rawlog-grabber runs one driver thread per INI section until a key arrives on
 its stdin (os::kbhit), then writes the rest of the log and exits 0; we send
 that key through a pipe once it reports enough saved scans. `rawlog-edit --export-2d-scans-txt` turns the
-.rawlog into one text line per scan: time, N ranges (m), N validity flags.
+.rawlog into one text line per scan: time, N ranges (m), N validity flags. Both
+tools are driven by emulator/bench/mrpt.py, which the SLAM pipeline shares.
 """
 
 from __future__ import annotations
 
-import re
-import shutil
-import subprocess
-import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
-from support.interop import require_program, scan_values, urg_step_values
+from support.interop import scan_values, urg_step_values
 from support.ports import free_tcp_port
 
+from emulator.bench import mrpt
 from emulator.bench.lms_rates import line_rate_limit
 
-MRPT_HINT = "apt-get install mrpt-apps (.ci/run installs it)"
+def grab(folder: Path, section: str, scans: int, timeout_s: float, *, kill: bool = False) -> mrpt.Grabbed:
+    """rawlog-grabber with one sensor section until it has saved `scans` observations or
+    `timeout_s` passed, then a key press (or SIGKILL)."""
+    return mrpt.grab(folder, section, until=lambda saved: saved >= scans, timeout_s=timeout_s, kill=kill)
 
 
-def grab(
-    folder: Path, section: str, scans: int, timeout_s: float, *, kill: bool = False
-) -> subprocess.CompletedProcess[str]:
-    """Run rawlog-grabber with one sensor section until it has saved `scans` observations
-    (its "Saved N objects." lines) or `timeout_s` passed, then press a key (or SIGKILL it)."""
-    grabber = require_program("rawlog-grabber", MRPT_HINT)
-    folder.mkdir(exist_ok=True)
-    config = folder / "grab.ini"
-    config.write_text(
-        "[global]\n"
-        f"rawlog_prefix = {folder / 'grab'}\n"
-        "time_between_launches = 100\n"
-        "use_sensoryframes = 0\n"
-        "GRABBER_PERIOD_MS = 100\n\n" + section
-    )
-    line_buffered = ["stdbuf", "-oL"] if shutil.which("stdbuf") else []  # its progress, as it happens
-    process = subprocess.Popen(
-        [*line_buffered, grabber, str(config)], cwd=folder, text=True,
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-    )
-    lines: list[str] = []
-    enough = threading.Event()
-
-    def follow() -> None:
-        saved = 0
-        for line in process.stdout:
-            lines.append(line)
-            found = re.search(r"Saved (\d+) objects", line)
-            saved += int(found.group(1)) if found else 0
-            if saved >= scans:
-                enough.set()
-
-    reader = threading.Thread(target=follow, daemon=True)
-    reader.start()
-    enough.wait(timeout_s)
-    if kill:  # a driver that dies mid-stream, leaving the device streaming
-        process.kill()
-    else:
-        process.stdin.write("\n")  # os::kbhit(): stop, flush the log, exit 0
-        process.stdin.close()
-    try:
-        process.wait(20)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        process.wait()
-        pytest.fail(f"rawlog-grabber did not stop on a key press:\n{''.join(lines)[-3000:]}")
-    reader.join(5)
-    return subprocess.CompletedProcess(process.args, process.returncode, "".join(lines), "")
-
-
-def exported_scans(folder: Path, label: str, grabbed: subprocess.CompletedProcess[str]):
+def exported_scans(folder: Path, label: str, grabbed: mrpt.Grabbed):
     """(times, ranges_m, valid) of the recorded scans, via rawlog-edit."""
-    logs = sorted(folder.glob("grab_*.rawlog"))
-    assert grabbed.returncode == 0 and len(logs) == 1, grabbed.stdout[-3000:]
-    editor = require_program("rawlog-edit", MRPT_HINT)
-    # Run beside the log: rawlog-edit 2.5 joins an absolute input's folder and
-    # the output name without a "/".
-    subprocess.run([editor, "--export-2d-scans-txt", "-i", logs[0].name],
-                   cwd=logs[0].parent, check=True, capture_output=True, timeout=60)
-    export = logs[0].with_name(f"{logs[0].stem}_{label}.txt")
-    assert export.exists(), grabbed.stdout[-3000:]
-    rows = np.loadtxt(export, comments="%", ndmin=2)
-    assert rows.shape[0] > 0, grabbed.stdout[-3000:]
-    count = (rows.shape[1] - 1) // 2
-    return rows[:, 0], rows[:, 1:1 + count], rows[:, 1 + count:]
+    assert grabbed.returncode == 0 and grabbed.rawlog is not None, grabbed.output[-3000:]
+    scans = mrpt.export_2d_scans(grabbed.rawlog, label)
+    return scans.times_s, scans.ranges_m, scans.valid
 
 
 def urg_section(link: str, port: int) -> str:
@@ -121,7 +62,7 @@ def test_chokuyourg(serve, urg_room: Path, tmp_path: Path, link: str) -> None:
 def test_chokuyourg_after_a_driver_killed_mid_stream(serve, urg_room: Path, tmp_path: Path) -> None:
     section = urg_section("pty", serve_urg(serve, urg_room, tmp_path, "pty"))
     killed = grab(tmp_path / "killed", section, scans=5, timeout_s=20, kill=True)
-    assert "Saved" in killed.stdout, killed.stdout[-3000:]
+    assert "Saved" in killed.output, killed.output[-3000:]
     times, _, _ = exported_scans(tmp_path / "next", "URG", grab(tmp_path / "next", section, scans=25, timeout_s=20))
     assert len(times) >= 20
 
@@ -152,7 +93,7 @@ def test_csicklaserserial_after_a_driver_killed_mid_stream(serve, lms_room: Path
     """The device keeps 38400 when its host dies; the next driver must find it there and move it."""
     port = serve(lms_room, f"lms=pty:{tmp_path / 'ttyLMS0'}").endpoint("lms", "pty").path
     killed = grab(tmp_path / "killed", lms_section(port, 38400), scans=5, timeout_s=30, kill=True)
-    assert "Saved" in killed.stdout, killed.stdout[-3000:]
+    assert "Saved" in killed.output, killed.output[-3000:]
     folder = tmp_path / "next"
     times, ranges, _ = exported_scans(folder, "LMS", grab(folder, lms_section(port, 500000), scans=25, timeout_s=40))
     assert len(times) >= 20 and ranges.shape[1] == 361
