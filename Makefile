@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 SCENE  ?= railway
 
-.PHONY: install serve test bench validation lint clean
+.PHONY: install serve test soak bench validation lint clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -16,11 +16,16 @@ $(VENV)/.installed: $(BIN)/python pyproject.toml
 
 install: $(VENV)/.installed
 
+# make serve ARGS="--endpoint urg=tcp:127.0.0.1:0 --speed 2"
 serve: install
-	$(BIN)/lrf-emulator serve $(SCENE)
+	$(BIN)/lrf-emulator serve $(SCENE) $(ARGS)
 
 test: install
 	$(BIN)/python -m pytest -q
+
+# The robustness suite at length: every attack ROBUSTNESS_SCALE times longer (CI runs it at 1 in `make test`).
+soak: install
+	ROBUSTNESS_SCALE=$${ROBUSTNESS_SCALE:-10} $(BIN)/python -m pytest -q -m robustness
 
 bench: install
 	$(BIN)/lrf-emulator bench

@@ -21,6 +21,8 @@ object and `lines` are printed in the table. Add a section by adding it to `SECT
   (`lms_rates`).
 - control: live control through a served daemon (`control_latency`): change →
   first scan showing it, and a 100 Hz pose stream's cost on MD jitter.
+- fairness: the LMS200's scan rate and command latency while one client floods
+  the URG with GDs and another writes 64 KiB/s of junk (`fairness`).
 - memory: peak resident set size of this process (last, so it covers the others).
 """
 
@@ -198,6 +200,12 @@ def control_section(quick: bool) -> Section:
     return control_bench(quick)
 
 
+def fairness_section(quick: bool) -> Section:
+    from emulator.bench.fairness import fairness_bench  # starts a daemon and attackers: imported only when run
+
+    return fairness_bench(quick)
+
+
 def memory_section(quick: bool) -> Section:
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
     return {"peak_rss_mb": peak_mb}, [f"memory: peak RSS {peak_mb:.1f} MB (this process)"]
@@ -210,5 +218,6 @@ SECTIONS: dict[str, Callable[[bool], Section]] = {
     "lms-rates": lms_rates_section,
     "serve": serve_section,
     "control": control_section,
+    "fairness": fairness_section,
     "memory": memory_section,
 }

@@ -17,6 +17,7 @@ import argparse
 import math
 
 from emulator.commands.options import add_scene_options, add_span_options, scene_from_args
+from emulator.commands.progress import progress
 from emulator.errors import UserError
 from emulator.plots.map import draw_map
 from emulator.plots.waterfall import draw_waterfall, pyplot, sensor_series
@@ -44,7 +45,8 @@ def run(args: argparse.Namespace) -> int:
     if args.sensor is None or args.end is None:
         raise UserError("--sensor and --end are required (or --map for a top-down map)")
     scene = scene_from_args(args)
-    series = sensor_series(scene, args.sensor, args.start, args.end)
+    series = sensor_series(scene, args.sensor, args.start, args.end,
+                           progress=lambda scans, count: progress(scans, count, f"plot {args.sensor}"))
     try:
         draw_waterfall(series, args.out, width_px=args.width, height_px=args.height)
     except OSError as error:

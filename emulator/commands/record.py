@@ -19,6 +19,7 @@ import itertools
 from pathlib import Path
 
 from emulator.commands.options import add_events_in_option, add_scene_options, add_span_options, scene_from_args, world_from_args
+from emulator.commands.progress import progress
 from emulator.errors import UserError
 from emulator.recording.ground_truth import with_ground_truth
 from emulator.recording.textlog import LogHeader, write_log
@@ -39,7 +40,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     scene = scene_from_args(args)
     sensor = create_sensor(scene, args.sensor, world_from_args(scene, args))
-    scans = scan_series(sensor, scan_times(sensor.configured_period_s, args.start, args.end))
+    times = scan_times(sensor.configured_period_s, args.start, args.end)
+    scans = progress(scan_series(sensor, times), len(times), f"record {sensor.name}")
     first = next(scans, None)
     if first is None:
         raise UserError(f"no scan of {sensor.name} completes between {args.start} and {args.end} s")

@@ -16,6 +16,7 @@ matplotlib is an optional extra: `pip install '.[plot]'`.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,7 @@ import numpy as np
 from emulator.errors import UserError
 from emulator.optics import World
 from emulator.scene import Scene
-from emulator.sensors import create_sensor, ranges_m
+from emulator.sensors import Scan, create_sensor, ranges_m
 from emulator.sensors.beam_geometry import scan_plane_rays
 from emulator.sensors.series import scan_series, scan_times
 
@@ -93,15 +94,20 @@ class SensorSeries:
         return 8.183 if self.unit == "mm" else 81.83
 
 
-def sensor_series(scene: Scene, sensor_name: str, start_s: float, end_s: float) -> SensorSeries:
-    """Every scan of the sensor in [start_s, end_s] and the smoke along its beams at each."""
+def sensor_series(
+    scene: Scene, sensor_name: str, start_s: float, end_s: float,
+    progress: Callable[[Iterator[Scan], int], Iterator[Scan]] | None = None,
+) -> SensorSeries:
+    """Every scan of the sensor in [start_s, end_s] and the smoke along its beams at each;
+    `progress(scans, count)` may wrap the scans as they are computed (a progress bar)."""
     world = World(scene)
     sensor = create_sensor(scene, sensor_name, world=world)
     spec = scene.sensor(sensor_name)
     times = scan_times(sensor.configured_period_s, start_s, end_s)
     if len(times) < 2:
         raise UserError(f"--start {start_s} to --end {end_s} holds fewer than two scans of {sensor_name}")
-    scans = list(scan_series(sensor, times))
+    computed = scan_series(sensor, times)
+    scans = list(progress(computed, len(times)) if progress is not None else computed)
     columns = URG_VALID_STEPS if spec.model == "urg-04lx" else slice(None)
     angles = np.asarray(scans[0].angles_rad)[columns]
     values = np.vstack([np.asarray(scan.values)[columns] for scan in scans]).astype(np.int64)

@@ -153,3 +153,5 @@ def test_version_and_debug_after_the_subcommand(
     for command in ("serve", "scan", "plot", "record", "replay", "bench", "scenes", None):
         help_text = run_main([command, "--help"] if command else ["--help"], tmp_path, capsys, monkeypatch).stdout
         assert "usage: lrf-emulator" in help_text and "CLI.md" not in help_text
+        if command == "replay":
+            assert "--device" in help_text  # every other --model is the smoke preset
