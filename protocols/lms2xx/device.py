@@ -167,6 +167,7 @@ class Lms200Device:
         self._last_output_streamed = False
         self._stream: _Stream | None = None
         self._pending: _PendingReply | None = None
+        self._window_todo: list[int] | None = None  # [next, last] scan index a mean still needs
         self._telegram_counter = 0
         self._scan_cache: dict[tuple[Variant, str, int, int], _Measured] = {}
         self._handlers: dict[int, Callable[[bytes, float], _Reply]] = {
@@ -211,6 +212,7 @@ class Lms200Device:
             return outputs
         for event in self._reader.expire(now):
             outputs += self._on_frame(event, now)
+        self._fetch_window_scans(now)
         if self._pending is not None and self._pending.due <= now + TIME_EPSILON_S:
             body, self._pending = self._pending.body, None
             outputs.append(self._send_reply(body(), now))
@@ -220,7 +222,8 @@ class Lms200Device:
     def next_deadline(self) -> float | None:
         if self._power_on_at is not None:
             return self._power_on_at
-        candidates = [self._reader.deadline(), self._pending.due if self._pending else None, self._stream_due()]
+        candidates = [self._reader.deadline(), self._pending.due if self._pending else None, self._stream_due(),
+                      self._window_scan_due()]
         due = [time for time in candidates if time is not None]
         return min(due) if due else None
 
@@ -234,11 +237,30 @@ class Lms200Device:
         """Simulated time of the scan the next streamed telegram will carry (None when not
         streaming): the newest scan complete when the line frees, so a daemon can compute
         it ahead. At a slow baud that is not the line-free time `next_deadline` gives."""
+        window_due = self._window_scan_due()
         due = self._stream_due()
         if self._stream is None or due is None:
-            return None
+            return window_due
         index = max(self._stream.next_index, latest_complete(due, self._stream.revolutions))
-        return completion_time(index, self._stream.revolutions)
+        streamed = completion_time(index, self._stream.revolutions)
+        return window_due if window_due is not None and window_due < streamed else streamed
+
+    # -- a mean's scans, fetched one by one as they complete ---------------
+
+    def _window_scan_due(self) -> float | None:
+        """When the next scan a waiting mean needs completes: each is fetched then, so that
+        answering a mean of 250 scans never asks for 250 scans at once (a daemon computes
+        each ahead, off its loop; fetching them all at the reply blocked it for 0.1-0.4 s)."""
+        if self._window_todo is None:
+            return None
+        return completion_time(self._window_todo[0], self._variant.revolutions)
+
+    def _fetch_window_scans(self, now: float) -> None:
+        while self._window_todo is not None and self._window_scan_due() <= now + TIME_EPSILON_S:
+            self._scan(self._window_todo[0])
+            self._window_todo[0] += 1
+            if self._window_todo[0] > self._window_todo[1]:
+                self._window_todo = None
 
     def connection_lost(self) -> None:
         """The host went away: stop streaming, back to mode 25. The line rate stays
@@ -249,6 +271,7 @@ class Lms200Device:
         self._line_free_at = float("-inf")
         self._stream = None
         self._pending = None
+        self._window_todo = None
         self._last_output_streamed = False
         if self._power_on_at is None:
             self._mode = Mode.ON_REQUEST
@@ -265,6 +288,7 @@ class Lms200Device:
         if interrupt:
             self._line_free_at = min(self._line_free_at, now)  # the rest of that scan is dropped
         self._pending = None
+        self._window_todo = None
         outputs = [self._send(ACK, now, interrupt=interrupt)]
         handler = self._handlers.get(event.body[0])
         reply = handler(event.body[1:], now) if handler else _Reply((NOT_ACKNOWLEDGED,))
@@ -326,6 +350,7 @@ class Lms200Device:
         revolutions = 1 if mode is Mode.STREAM_PARTIAL else self._variant.revolutions
         first = latest_complete(now, revolutions) + 1
         if mode in MEAN_MODES:
+            self._window_todo = [first, first + self._means - 1]  # fetched as they complete, like 36's
             first += self._means - 1  # the first window of n scans
         self._stream = _Stream(revolutions, first)
 
@@ -454,9 +479,11 @@ class Lms200Device:
 
     def _schedule_mean(self, scans: int, now: float, body: Callable[[int], bytes]) -> None:
         """Answer once the next `scans` scans are measured."""
-        last_index = latest_complete(now, self._variant.revolutions) + scans
+        latest = latest_complete(now, self._variant.revolutions)
+        last_index = latest + scans
         due = completion_time(last_index, self._variant.revolutions)
         self._pending = _PendingReply(due, lambda: body(last_index))
+        self._window_todo = [latest + 1, last_index]
 
     # -- commands -----------------------------------------------------------
 

@@ -205,6 +205,10 @@ def test_means_wait_for_their_scans(device: Lms200Device) -> None:
     assert ask(device, b"\x36\x02", now) == [ACK]
     last = now * 75 // 2 + 2  # the second 0.5° scan completed after the request
     due = last * 2 / 75
+    # the window's scans are fetched one by one as they complete, never all at the reply
+    assert device.next_deadline() == pytest.approx((last - 1) * 2 / 75)
+    assert device.next_scan_time() == pytest.approx((last - 1) * 2 / 75)
+    assert device.poll((last - 1) * 2 / 75) == []
     assert device.next_deadline() == pytest.approx(due)
     assert device.poll(due - 0.001) == []
     (mean,) = [o.data for o in device.poll(due)]
@@ -307,3 +311,18 @@ def test_permanent_baud_survives_a_reset(device: Lms200Device) -> None:
 def test_constructor_refuses_what_the_lms200_cannot_be(source: Source, kwargs: dict) -> None:
     with pytest.raises(ValueError):
         Lms200Device(source, **kwargs)
+
+
+def test_a_mean_of_250_scans_asks_for_each_scan_as_it_completes_never_all_at_once(
+    device: Lms200Device, source: Source
+) -> None:
+    """36 FA used to ask its source for 250 scans at the reply (0.1-0.4 s on a daemon's loop)."""
+    assert ask(device, b"\x36\xfa") == [ACK]
+    most_per_poll, reply_bytes = 0, b""
+    while not reply_bytes:
+        before = len(source.calls)
+        deadline = device.next_deadline()
+        reply_bytes = b"".join(output.data for output in device.poll(deadline))
+        most_per_poll = max(most_per_poll, len(source.calls) - before)
+    assert reply_bytes[4] == 0xB6 and reply_bytes[5] == 250
+    assert most_per_poll == 1 and len(source.calls) == 250
