@@ -73,7 +73,7 @@ def recorded_row(log: Log, timestamp_ms: int) -> int:
 
 
 def test_hokuyolx_gets_the_recorded_urg_values(tmp_path: Path, tcp_port: int) -> None:
-    log_path = record(tmp_path, "bocas", "urg", 71.0, 73.0)  # the error onset at 71.6 s lies inside
+    log_path = record(tmp_path, "bocas", "urg", 70.0, 74.0)  # the error onset at 71.6 s lies inside; 41 rows: GDs a cycle apart (0.1 s reply + 0.2 s) meet distinct rows
     log = read_log(log_path)
     with replaying(log_path, "urg-04lx", f"tcp:127.0.0.1:{tcp_port}", tmp_path) as ready:
         assert (ready.sensor, ready.model) == ("urg", "urg-04lx")
