@@ -213,7 +213,13 @@ class DeviceSession:
     def _wake(self) -> None:
         self._timer = None
         deadline = self.device.next_deadline()
-        job = self._pending(self._scan_time(deadline)) if self._pending is not None and deadline is not None else None
+        job = None
+        if self._pending is not None and deadline is not None:
+            scan_time = self._scan_time(deadline)
+            job = self._pending(scan_time)
+            if job is None and self._prefetch is not None:
+                self._prefetch(scan_time)  # not foreseen (a new client, a missed prefetch): start it, don't block
+                job = self._pending(scan_time)
         if job is not None and not job.done():
             waiting = self._timer = _WaitingForScan()
             job.add_done_callback(lambda _: self._loop.call_soon_threadsafe(self._resume, waiting))

@@ -5,13 +5,17 @@ from __future__ import annotations
 import asyncio
 import heapq
 import itertools
+import threading
+from concurrent.futures import Future
 from types import SimpleNamespace
 from typing import Any, Callable
 
 import numpy as np
 
 from emulator.daemon.clock import ManualClock
+from emulator.daemon.scan_cache import ScanCache
 from emulator.daemon.service import DeviceSession
+from emulator.sensors.scan import Scan
 from protocols.lms2xx import Lms200Device, build_telegram
 
 
@@ -61,3 +65,78 @@ def test_an_lms200_on_a_slow_line_is_prefetched_the_scan_it_then_sends() -> None
         loop.close()
     assert len(asked) > 20
     assert set(asked) <= set(prefetched), sorted(set(asked) - set(prefetched))[:5]
+
+
+class RecordingSource:
+    def scan(self, time_s: float) -> Scan:
+        return Scan("urg", "urg-04lx", time_s, np.zeros(3), np.full(3, 1000))
+
+    def scans(self, times_s: list[float]) -> list[Scan]:
+        return [self.scan(time_s) for time_s in times_s]
+
+
+class HeldExecutor:
+    """Runs jobs only when released (or after `give_up_s`, so a test that blocks on one ends)."""
+
+    def __init__(self, give_up_s: float = 2.0) -> None:
+        self.run_at_once = True
+        self.held: list[tuple[Future, Callable[[], Any]]] = []
+        self._give_up_s = give_up_s
+
+    def submit(self, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Future:
+        future: Future = Future()
+        job = (future, lambda: future.set_result(fn(*args, **kwargs)))
+        if self.run_at_once:
+            job[1]()
+        else:
+            self.held.append(job)
+            threading.Timer(self._give_up_s, self.release).start()
+        return future
+
+    def release(self) -> None:
+        while self.held:
+            future, run = self.held.pop(0)
+            if not future.done():
+                run()
+
+
+class OneScanDevice:
+    """Wants the scan at 1.0 s once, at its deadline 1.0 s."""
+
+    def __init__(self, scans: Callable[..., Any]) -> None:
+        self.scans, self.sent = scans, []
+        self.baud = None
+
+    def next_deadline(self) -> float | None:
+        return None if self.sent else 1.0
+
+    def poll(self, now: float) -> list:
+        self.sent.append(self.scans(1.0))
+        return []
+
+
+def test_a_scan_nobody_foresaw_is_started_at_the_deadline_and_waited_for_without_blocking_the_loop() -> None:
+    executor = HeldExecutor()
+    cache = ScanCache(RecordingSource(), executor)
+    cache(0.5)  # an earlier client's request: the cache knows what this sensor is asked for
+    executor.run_at_once = False
+    loop = asyncio.new_event_loop()
+    device = OneScanDevice(cache)
+    session: DeviceSession
+
+    def wake_only(delay: float, callback: Callable[..., None], *args: Any) -> Any:
+        if callback == session._wake:  # prefetch timers never fire: the scan is not foreseen
+            return loop.call_later(delay, callback, *args)
+        return SimpleNamespace(cancel=lambda: None)
+
+    session = DeviceSession(device, ManualClock(1.0), loop, cache.prefetch, wake_only, pending=cache.pending)
+    try:
+        session.start()
+        loop.run_until_complete(asyncio.sleep(0.05))
+        assert device.sent == [] and len(executor.held) == 1  # started, and the device waits for it
+        executor.release()
+        loop.run_until_complete(asyncio.sleep(0.05))
+    finally:
+        loop.close()
+    assert [scan.time_s for scan in device.sent] == [1.0]
+    assert cache.waits == 0  # the loop never waited on the computation
