@@ -14,6 +14,7 @@ and starts them again, so no scan computed ahead of a change is served after it.
 
 from __future__ import annotations
 
+import asyncio
 import dataclasses
 from collections import OrderedDict, deque
 from concurrent.futures import Executor, Future
@@ -142,8 +143,29 @@ class ScanCache:
                 self._submit_batch([again_s], dict(shape))
             else:
                 self._outdated[key] = job
+                self._restart_when_done(key, job)
         for key in sorted(self._outdated, key=lambda key: key[0])[: max(0, len(self._outdated) - self._size)]:
             del self._outdated[key]  # the oldest: long past, no device asks for them any more
+
+    def _restart_when_done(self, key: tuple, job: Future) -> None:
+        """Start an outdated scan again as soon as its old job ends (on the loop's thread, which owns
+        the cache), so a device seldom waits for two jobs in turn; without a running loop (a direct
+        caller) it is started when asked for (`pending`, `prefetch`, a call)."""
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:
+            return
+        def restart(_: Future) -> None:
+            try:
+                loop.call_soon_threadsafe(self._restart_outdated, key, job)
+            except RuntimeError:  # the loop was closed meanwhile (the daemon stopped)
+                pass
+
+        job.add_done_callback(restart)
+
+    def _restart_outdated(self, key: tuple, job: Future) -> None:
+        if self._outdated.get(key) is job and key not in self._futures:
+            self._future(key[0] / TICKS_PER_S, dict(key[1:]))
 
     def pending(self, time_s: float) -> Future | None:
         """The job computing the last request's scan at `time_s`, if one was started: a daemon

@@ -328,7 +328,7 @@ class Daemon:
         self.live: LiveState | None = self.world.live if self.world is not None else None
         if sensor_factory is None and self.world is None:
             self.live = LiveState(scene)
-        self.applied: list[LiveEvent] = []  # world events applied so far, for workers started later
+        self._before_workers: list[LiveEvent] = []  # world events applied before the workers started
         self.scan_caches: dict[str, ScanCache] = {}  # per sensor served, once started
         self._endpoint_sensors: list[tuple[str, PtyEndpoint | TcpEndpoint]] = []
         self._timer: PreciseTimer | None = None
@@ -373,8 +373,9 @@ class Daemon:
         count = min(self._workers, len(names)) or 1
         self.pool = WorkerPool(self.scene, [tuple(names[index::count]) for index in range(count)])
         self.pool.start()
-        if self.applied:  # changes applied before the workers existed (serve --events-in)
-            self.pool.apply([event_record(event) for event in self.applied])
+        if self._before_workers:  # changes applied before the workers existed (serve --events-in)
+            self.pool.apply([event_record(event) for event in self._before_workers])
+            self._before_workers.clear()  # the pool keeps them from now on (a restarted worker replays them)
         pool = self.pool
         return (lambda spec: pool.sensor(spec.name)), pool.executor()
 
@@ -429,9 +430,10 @@ class Daemon:
         if self.live is None:
             raise UserError("this daemon serves recorded scans: its world cannot change")
         self.live.apply(event)
-        self.applied.append(event)
         if self.pool is not None:
             self.pool.apply([event_record(event)])  # queued before the scans submitted below
+        elif self.world is None:
+            self._before_workers.append(event)
         for scans in self.scan_caches.values():
             scans.invalidate_from(event.time_s)
 
