@@ -369,3 +369,10 @@ def test_a_paused_clock_stops_the_device_stream_and_resuming_continues_it(daemon
         read_for(0.5)
         assert messages() >= paused_at + 3
         client.sendall(b"QT\n")
+
+
+def test_only_a_live_body_takes_a_pose_from_outside() -> None:
+    with ServeProcess("rescue", ["urg=tcp:127.0.0.1:0"], extra_args=("--sensors", "urg", "--control", "127.0.0.1:0")) as d:
+        status, answer = call(d.control_url, "PUT", "/api/bodies/east_door/pose", {"position": [0, 0, 0], "yaw_deg": 5})
+        assert status == 409 and answer["key"] == "bodies[east_door]" and '"live"' in answer["error"]
+        assert call(d.control_url, "GET", "/api/events")[1] == []
