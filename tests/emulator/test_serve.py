@@ -53,8 +53,11 @@ def decode_md_scan(message: bytes) -> tuple[int, list[int]]:
 
 
 def run_serve(*args: str, cwd: Path) -> subprocess.CompletedProcess:
+    """`serve` with its control API and view off, so a daemon already on their default ports
+    (a user's, another test's) cannot change which error a test sees."""
     return subprocess.run(
-        [*serve_command(), "serve", *args], cwd=cwd, capture_output=True, text=True, timeout=60
+        [*serve_command(), "serve", *args, "--control", "off", "--view", "off"],
+        cwd=cwd, capture_output=True, text=True, timeout=60,
     )
 
 
