@@ -206,6 +206,12 @@ def fairness_section(quick: bool) -> Section:
     return fairness_bench(quick)
 
 
+def view_section(quick: bool) -> Section:
+    from emulator.bench.view_cost import bench_section  # starts daemons and a browser: imported only when run
+
+    return bench_section(quick)
+
+
 def memory_section(quick: bool) -> Section:
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
     return {"peak_rss_mb": peak_mb}, [f"memory: peak RSS {peak_mb:.1f} MB (this process)"]
@@ -219,5 +225,6 @@ SECTIONS: dict[str, Callable[[bool], Section]] = {
     "serve": serve_section,
     "control": control_section,
     "fairness": fairness_section,
+    "view": view_section,
     "memory": memory_section,
 }
