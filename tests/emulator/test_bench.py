@@ -12,7 +12,7 @@ from emulator.scene import bundled_scenes, load_scene
 
 def bench(*args: str) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "emulator.cli", "bench", "--quick", *args], capture_output=True, text=True, timeout=300
+        [sys.executable, "-m", "emulator.cli", "bench", "--quick", *args], capture_output=True, text=True, timeout=600
     )
 
 
@@ -55,6 +55,10 @@ def test_bench_json_reports_every_bundled_sensor_and_every_section():
     assert changes["violations"] == 0  # no scan stamped after a change shows the world before it
     assert 0 <= changes["simulated"]["p50_ms"] <= changes["simulated"]["max_ms"]
     assert report["control_jitter"]["pose_stream_100hz"]["poses_sent"] > 0
+    # what watching costs: view off, view unwatched, view in chromium, --mcap
+    assert [row["case"] for row in report["view"]] == ["view off", "view, no browser", "view + chromium", "--mcap"]
+    assert all(row["rate"] > 0.5 and row["cpu_ms_per_scan"] > 0 for row in report["view"])
+    assert report["view"][3]["mcap_bytes"] > 0
 
 
 def test_bench_table_shows_only_the_chosen_sections():
