@@ -49,7 +49,16 @@ def _slab(
         inside = (lower <= origins) & (origins <= upper)
         near = np.where(parallel, np.where(inside, -np.inf, np.inf), near)
         far = np.where(parallel, np.where(inside, np.inf, -np.inf), far)
-    return near.max(axis=-1), far.min(axis=-1)
+    return _across_last_axis(np.maximum, near), _across_last_axis(np.minimum, far)
+
+
+def _across_last_axis(combine: np.ufunc, values: np.ndarray) -> np.ndarray:
+    """`combine` folded over the (short) last axis, one whole-array pass per axis: a reduction along a
+    length-3 axis pays numpy's per-row set-up on every ray, several times this cost."""
+    result = values[..., 0]
+    for axis in range(1, values.shape[-1]):
+        result = combine(result, values[..., axis])
+    return result
 
 
 def slab_intervals(
