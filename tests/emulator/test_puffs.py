@@ -87,3 +87,26 @@ def test_optical_path_to_some_rows_and_unbounded_limits(puffs):
     single = crossings.optical_path_to(limits[:, 0])
     assert single.shape == (720,)
     np.testing.assert_array_equal(single, whole[:, 0])
+
+
+def test_block_cut_of_beams_with_own_origins_keeps_exactly_the_all_pairs_crossings(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A moving sensor's beams each start elsewhere: the 16-beam block boxes may only drop pairs the exact
+    tests drop too, so every crossing (and its order, which sums depend on) equals the all-pairs one."""
+    import emulator.optics.puffs as puffs_module
+
+    rng = np.random.default_rng(12)
+    cases = []
+    for _ in range(200):
+        n_beams, n_puffs = int(rng.integers(1, 200)), int(rng.integers(0, 300))
+        origins = rng.normal(size=(n_beams, 3)) * 0.05 + rng.normal(size=3)
+        directions = rng.normal(size=(n_beams, 3))
+        directions /= np.linalg.norm(directions, axis=1)[:, None]
+        puffs = Puffs(rng.uniform(-8, 8, (n_puffs, 3)), rng.uniform(0.05, 1.5, n_puffs), rng.uniform(0, 3, n_puffs))
+        cases.append((puffs, origins, directions, rng.uniform(0.1, 10, n_beams)))
+    blocked = [cross_beams(*case) for case in cases]
+    monkeypatch.setattr(puffs_module, "_block_pairs", lambda o, d, e, centers, r: puffs_module._all_pairs(len(o), len(centers)))
+    assert sum(len(c) for c in blocked) > 1000  # the cases do cross
+    for case, fast in zip(cases, blocked):
+        slow = cross_beams(*case)
+        for name in ("beam", "along_m", "sigma", "column", "before_origin"):
+            np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name))
