@@ -8,7 +8,10 @@ they differ only in how a client arrives and leaves.
 
 from __future__ import annotations
 
+import array
 import asyncio
+import fcntl
+import termios
 import time
 from typing import Callable
 
@@ -29,6 +32,18 @@ INPUT_SLICE_BYTES = 512
 # on it) instead of starving every other client and sensor of the loop.
 INPUT_CPU_SHARE = 0.05
 INPUT_CPU_BURST_S = 0.005
+
+
+def unsent_bytes(fd: int) -> int:
+    """Bytes written to `fd` that its reader has not taken yet, as far as this end's kernel
+    knows (TIOCOUTQ, which is SIOCOUTQ on a TCP socket: sent but not yet acknowledged);
+    0 when the kernel cannot tell."""
+    count = array.array("i", [0])
+    try:
+        fcntl.ioctl(fd, termios.TIOCOUTQ, count, True)
+    except OSError:
+        return 0
+    return count[0]
 
 
 class Link:
@@ -59,8 +74,9 @@ class Link:
         on_lost: Callable[[], None],
         accepts_input: Callable[[], bool] = lambda: True,
         limit_bytes: int = DEFAULT_LIMIT_BYTES,
+        kernel_backlog: Callable[[], int] | None = None,
     ) -> None:
-        self.outbox = Outbox(limit_bytes)
+        self.outbox = Outbox(limit_bytes, kernel_backlog)
         self.discarded_input = 0  # bytes dropped: wrong baud, or replies piling up unread
         self._loop = loop
         self._fd = fd
@@ -92,6 +108,10 @@ class Link:
             return
         for output in outputs:
             self.outbox.put(output)
+        if self.outbox.holding and self._pace_timer is not None:
+            # the held output may now be replaced by these: look again at once, not on the timer
+            self._pace_timer.cancel()
+            self._pace_timer = None
         self._pump()
 
     def close(self) -> None:
@@ -235,6 +255,7 @@ class ClientSlot:
         write: Callable[[bytes], int],
         on_lost: Callable[[], None],
         accepts_input: Callable[[], bool] = lambda: True,
+        kernel_backlog: Callable[[], int] | None = None,
     ) -> None:
         """A client arrived on `fd`: link it to the session."""
         self.clients_served += 1
@@ -247,6 +268,7 @@ class ClientSlot:
             on_lost=on_lost,
             accepts_input=accepts_input,
             limit_bytes=self._limit_bytes,
+            kernel_backlog=kernel_backlog,
         )
 
     def _disconnect(self) -> None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
+from typing import Callable
 
 from protocols.device import Output
 
@@ -18,6 +19,13 @@ BITS_PER_BYTE = 10  # 8N1: start bit, 8 data bits, stop bit
 PACE_QUANTUM_S = 0.008
 CATCH_UP_S = 0.02  # a late wake-up inside an output may catch up this much
 DEFAULT_LIMIT_BYTES = 16 * 1024
+# While a droppable output is held because the kernel still queues earlier bytes for the
+# client, the queue is looked at again this often (or sooner, when something is put).
+KERNEL_RECHECK_S = 0.02
+# A droppable output is held while the kernel holds more unread bytes than it has, or than
+# this: short telegrams on a slow line keep streaming into a host's buffer like a real line's
+# (a 9600 Bd LMS200 client pausing 2 s still finds what the line carried meanwhile).
+KERNEL_BACKLOG_BYTES = 2048
 
 
 @dataclass(eq=False)
@@ -37,11 +45,23 @@ class Outbox:
     queue of their own, each is shed at most once and a shed one stays in the
     main queue, marked, until it reaches the head (walking the whole queue on
     every put once replies had piled up made one 64 KiB write cost 36 s).
+
+    With `kernel_backlog` (bytes written to the fd that the client has not yet
+    taken), a droppable output is not started while the kernel still holds more
+    than one such output (or KERNEL_BACKLOG_BYTES): it waits here, where a newer output can still replace
+    it, instead of in the kernel, where it would reach a reader resuming after a
+    stall before any fresh one. A held output is dropped as soon as anything
+    newer waits behind it, so a reply is never held back and what goes out
+    keeps its order.
     """
 
-    def __init__(self, limit_bytes: int = DEFAULT_LIMIT_BYTES) -> None:
+    def __init__(
+        self, limit_bytes: int = DEFAULT_LIMIT_BYTES, kernel_backlog: Callable[[], int] | None = None
+    ) -> None:
         self.limit_bytes = limit_bytes
         self.dropped = 0  # whole outputs dropped because the client was not reading
+        self.holding = False  # the head is a droppable output waiting for the kernel to drain
+        self._kernel_backlog = kernel_backlog
         self._queue: deque[_Pending] = deque()
         self._droppable: deque[_Pending] = deque()  # the droppable ones among them, oldest first
         self._pending_bytes = 0
@@ -77,11 +97,20 @@ class Outbox:
 
     def chunk(self, now: float) -> tuple[bytes, float | None]:
         """What may be written at wall time `now`: (bytes, None), or (b"", wake-up time)
-        when pacing holds the line, or (b"", None) when nothing waits."""
+        when pacing or a backlog in the kernel holds the line, or (b"", None) when nothing waits."""
+        self.holding = False
         self._skip_dropped()
         if not self._queue:
             return b"", None
         head = self._queue[0]
+        if head.output.droppable and head.sent == 0 and self._kernel_backlog is not None:
+            backlog = self._kernel_backlog()
+            while head.output.droppable and head.sent == 0 and backlog > max(len(head.output.data), KERNEL_BACKLOG_BYTES):
+                if len(self._queue) == 1:
+                    self.holding = True
+                    return b"", now + KERNEL_RECHECK_S
+                self._drop_head()
+                head = self._queue[0]
         remaining = memoryview(head.output.data)[head.sent :]
         baud = head.output.baud
         if baud is None:
@@ -119,6 +148,15 @@ class Outbox:
             item.dropped = True
             self._pending_bytes -= len(item.output.data)
             self.dropped += 1
+
+    def _drop_head(self) -> None:
+        """Drop the head output (droppable, not started): something newer waits behind it."""
+        head = self._queue.popleft()
+        if self._droppable and self._droppable[0] is head:
+            self._droppable.popleft()
+        self._pending_bytes -= len(head.output.data)
+        self.dropped += 1
+        self._skip_dropped()
 
     def _skip_dropped(self) -> None:
         while self._queue and self._queue[0].dropped:

@@ -9,8 +9,10 @@ slave is always "readable", so it cannot stay registered with the loop).
 
 from __future__ import annotations
 
+import array
 import asyncio
 import errno
+import fcntl
 import os
 import re
 import select
@@ -123,6 +125,7 @@ class PtyEndpoint(ClientSlot):
                 write=lambda data: os.write(self._master, data),
                 on_lost=self._client_left,
                 accepts_input=self._baud_matches,
+                kernel_backlog=self._unread_by_client,
             )
         else:
             self._presence_timer = self._loop.call_later(PRESENCE_POLL_S, self._watch_for_client)
@@ -130,6 +133,23 @@ class PtyEndpoint(ClientSlot):
     def _baud_matches(self) -> bool:
         baud = self._session.baud
         return baud is None or self.client_baud() == baud
+
+    def _unread_by_client(self) -> int:
+        """Bytes waiting in the slave's input for the client to read. The master cannot tell
+        (its TIOCOUTQ stays 0): FIONREAD on the slave, opened for the question, can; the
+        pty's own buffers beyond it (≈ 18 KiB) only fill once that reads 4095."""
+        try:
+            slave = os.open(self.slave_name, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        except OSError:
+            return 0
+        try:
+            count = array.array("i", [0])
+            fcntl.ioctl(slave, termios.FIONREAD, count, True)
+            return count[0]
+        except OSError:
+            return 0
+        finally:
+            os.close(slave)
 
     def _client_left(self) -> None:
         self._disconnect()

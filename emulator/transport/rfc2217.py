@@ -23,7 +23,7 @@ from serial.rfc2217 import IAC, M_NORMAL, PortManager
 
 from emulator.scene.endpoints import Rfc2217Address
 from emulator.transport import Session
-from emulator.transport.link import READ_SIZE
+from emulator.transport.link import READ_SIZE, unsent_bytes
 from emulator.transport.outbox import DEFAULT_LIMIT_BYTES
 from emulator.transport.tcp import IDLE_TIMEOUT_S, TcpEndpoint
 from protocols.device import Output
@@ -84,6 +84,7 @@ class Rfc2217Endpoint(TcpEndpoint):
             client.fileno(),
             read=lambda: self._data_from(client.recv(READ_SIZE)),
             write=client.send,
+            kernel_backlog=lambda: unsent_bytes(client.fileno()),
             on_lost=self._client_left,
             accepts_input=self._at_device_rate,
         )

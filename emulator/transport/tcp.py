@@ -17,7 +17,7 @@ import socket
 from emulator.errors import UserError
 from emulator.scene.endpoints import TcpAddress
 from emulator.transport import Session
-from emulator.transport.link import READ_SIZE, ClientSlot
+from emulator.transport.link import READ_SIZE, ClientSlot, unsent_bytes
 from emulator.transport.outbox import DEFAULT_LIMIT_BYTES
 
 # The kernel's send buffer would otherwise autotune to megabytes of stale scans
@@ -106,6 +106,7 @@ class TcpEndpoint(ClientSlot):
             client.fileno(),
             read=lambda: client.recv(READ_SIZE),
             write=client.send,
+            kernel_backlog=lambda: unsent_bytes(client.fileno()),
             on_lost=self._client_left,
         )
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from hypothesis import given
 from hypothesis import strategies as st
 
-from emulator.transport.outbox import BITS_PER_BYTE, PACE_QUANTUM_S, Outbox
+from emulator.transport.outbox import BITS_PER_BYTE, KERNEL_BACKLOG_BYTES, KERNEL_RECHECK_S, PACE_QUANTUM_S, Outbox
 from protocols.device import Output
 
 
@@ -175,3 +175,66 @@ def test_what_goes_out_is_whole_outputs_in_order_and_every_reply(
             assert output.droppable, "a reply was dropped"
     assert remaining == b""
     assert len(tagged) - len(kept) == outbox.dropped
+
+
+class Kernel:
+    """What the link's fd reports as written but not yet taken by the client."""
+
+    def __init__(self) -> None:
+        self.unread = 0
+
+    def __call__(self) -> int:
+        return self.unread
+
+
+def scan(tag: bytes) -> Output:
+    return Output(tag * (KERNEL_BACKLOG_BYTES + 100), droppable=True)
+
+
+def test_a_scan_waits_in_the_outbox_while_the_kernel_holds_more_than_one_message() -> None:
+    kernel = Kernel()
+    outbox = Outbox(kernel_backlog=kernel)
+    kernel.unread = KERNEL_BACKLOG_BYTES + 150
+    outbox.put(scan(b"a"))
+    assert outbox.chunk(1.0) == (b"", 1.0 + KERNEL_RECHECK_S)
+    assert outbox.holding
+    kernel.unread = KERNEL_BACKLOG_BYTES + 100  # one message: the reader is keeping up
+    assert outbox.chunk(1.02) == (b"a" * (KERNEL_BACKLOG_BYTES + 100), None)
+    assert not outbox.holding
+
+
+def test_a_held_scan_gives_way_to_a_newer_scan_and_to_a_reply_without_reordering() -> None:
+    kernel = Kernel()
+    outbox = Outbox(kernel_backlog=kernel)
+    kernel.unread = 10_000
+    outbox.put(scan(b"a"))
+    outbox.chunk(0.0)
+    outbox.put(scan(b"b"))  # replaces the held one
+    outbox.put(Output(b"REPLY"))  # never held back: the scan ahead of it is dropped
+    outbox.put(scan(b"c"))
+    assert outbox.chunk(0.0) == (b"REPLY", None)
+    outbox.consume(5)
+    assert outbox.chunk(0.0) == (b"", KERNEL_RECHECK_S)  # c is the newest: it waits
+    kernel.unread = 0
+    written, _ = drain(outbox)
+    assert written == b"c" * (KERNEL_BACKLOG_BYTES + 100)
+    assert outbox.dropped == 2
+
+
+def test_a_scan_already_started_is_finished_whatever_the_kernel_holds() -> None:
+    kernel = Kernel()
+    outbox = Outbox(kernel_backlog=kernel)
+    outbox.put(scan(b"a"))
+    data, _ = outbox.chunk(0.0)
+    outbox.consume(40)
+    kernel.unread = 10_000
+    outbox.put(scan(b"b"))
+    assert outbox.chunk(0.0) == (b"a" * (KERNEL_BACKLOG_BYTES + 60), None)
+
+
+def test_short_scans_keep_streaming_until_the_kernel_holds_kernel_backlog_bytes() -> None:
+    kernel = Kernel()
+    outbox = Outbox(kernel_backlog=kernel)
+    kernel.unread = KERNEL_BACKLOG_BYTES
+    outbox.put(Output(b"t" * 732, droppable=True))  # an LMS200 telegram
+    assert outbox.chunk(0.0) == (b"t" * 732, None)
