@@ -35,6 +35,7 @@ import numpy as np
 from emulator.bench.serve_load import cpu_seconds
 from emulator.bench.serve_process import ServeProcess
 from emulator.bench.transport_latency import JITTER_TARGET_MS, STREAM_COMMAND, _Line
+from protocols.scip.encoding import decode_values, join_data_lines
 
 SCAN_PERIOD_MS = 100.0
 FRONT_INDEX = 384 - 44  # step 384 (straight ahead) in an MD 44..725 scan
@@ -77,14 +78,9 @@ position = [0.0, 0.0, 0.3]
 
 
 def _decode_md(message: bytes) -> tuple[int, np.ndarray]:
-    """(time stamp ms, values) of one MD scan message (3-character encoding)."""
-    lines = message.split(b"\n")
-    stamp = 0
-    for char in lines[2][:-1]:
-        stamp = (stamp << 6) | (char - 0x30)
-    data = np.frombuffer(b"".join(line[:-1] for line in lines[3:] if line), dtype=np.uint8).astype(np.int64) - 0x30
-    triples = data[: len(data) // 3 * 3].reshape(-1, 3)
-    return stamp, (triples[:, 0] << 12) | (triples[:, 1] << 6) | triples[:, 2]
+    """(time stamp ms, values) of one MD scan message (3-character encoding), checksums verified."""
+    lines = [line for line in message.split(b"\n") if line]
+    return int(decode_values(lines[2][:4], 4)[0]), decode_values(join_data_lines(b"\n".join(lines[3:]) + b"\n"), 3)
 
 
 class _Api:

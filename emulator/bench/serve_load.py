@@ -35,6 +35,7 @@ import numpy as np
 
 from emulator.bench.serve_process import ServeProcess
 from emulator.scene import bundled_scenes
+from protocols.scip.encoding import decode_values
 
 MD_UNLIMITED = b"MD0044072501000\n"
 SCAN_PERIOD_S = 0.1
@@ -97,12 +98,8 @@ class _Stream:
             if not self.echoed:
                 self.echoed = True
                 continue
-            lines = message.split(b"\n")
-            stamp = 0
-            for char in lines[2][:-1]:
-                stamp = (stamp << 6) | (char - 0x30)
             self.arrivals.append(now)
-            self.stamps.append(stamp)
+            self.stamps.append(int(decode_values(message.split(b"\n")[2][:4], 4)[0]))
 
 
 def measure_serve(count: int, duration_s: float, workers: int | None = None, model: str = "physical") -> dict:

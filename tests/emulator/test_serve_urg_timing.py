@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import socket
 import time
-from pathlib import Path
 
 import pytest
 
 from emulator.bench.serve_process import ServeProcess
+from protocols.scip.encoding import decode_values
 
 SCENE = """
 [[sensors]]
@@ -58,11 +58,7 @@ class Client:
 
 
 def stamp_of(reply: bytes) -> int:
-    line = reply.split(b"\n")[2]
-    stamp = 0
-    for char in line[:4]:
-        stamp = (stamp << 6) | (char - 0x30)
-    return stamp
+    return int(decode_values(reply.split(b"\n")[2][:4], 4)[0])
 
 
 def test_a_command_sent_just_after_a_reply_waits_for_the_next_cycle(daemon):
