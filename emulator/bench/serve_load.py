@@ -62,7 +62,7 @@ def fleet_scene_text(count: int) -> str:
 def cpu_seconds(pid: int, children: bool = True) -> float:
     """User + system CPU of process `pid` and (unless told not to) of its live child processes (the scan workers)."""
     total = 0.0
-    for process in [pid, *(_children(pid) if children else [])]:
+    for process in [pid, *(child_pids(pid) if children else [])]:
         try:
             fields = Path(f"/proc/{process}/stat").read_text().rsplit(")", 1)[1].split()
         except OSError:
@@ -71,7 +71,7 @@ def cpu_seconds(pid: int, children: bool = True) -> float:
     return total
 
 
-def _children(pid: int) -> list[int]:
+def child_pids(pid: int) -> list[int]:
     children = []
     for task in Path(f"/proc/{pid}/task").iterdir():
         try:

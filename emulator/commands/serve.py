@@ -36,6 +36,7 @@ from emulator.control.server import DEFAULT_ADDRESS, ControlAddress, ControlServ
 from emulator.control.session import LiveSession
 from emulator.daemon.clock import WallClock
 from emulator.daemon.memory import keep_freed_memory
+from emulator.daemon.workers import WORKER_NICE
 from emulator.daemon.service import Daemon, Ready
 from emulator.errors import UserError
 from emulator.recording.world_snapshot import SceneSnapshots
@@ -89,6 +90,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="worker processes computing scans (default: one per core, at most one per sensor; 0: in-process)",
     )
     parser.add_argument(
+        "--worker-nice",
+        type=int,
+        default=WORKER_NICE,
+        metavar="N",
+        help=f"the workers' CPU priority, 0..19 (default {WORKER_NICE}: they give way to the wire; "
+        "lower it on a machine whose cores other work keeps busy)",
+    )
+    parser.add_argument(
         "--view", metavar="HOST:PORT|off", default=None,
         help=f"the browser view (default {DEFAULT_VIEW}; quietly off if that port is taken; loopback only)",
     )
@@ -125,6 +134,8 @@ def run(args: argparse.Namespace) -> int:
     if args.workers is not None and args.workers < 0:
         raise UserError(f"--workers must be >= 0, got {args.workers}")
     workers = args.workers if args.workers is not None else os.cpu_count() or 1
+    if not 0 <= args.worker_nice <= 19:
+        raise UserError(f"--worker-nice must be 0..19, got {args.worker_nice}")
     try:
         clock = WallClock.from_epoch(args.epoch, args.speed) if args.epoch is not None else WallClock(args.speed)
     except ValueError as error:
@@ -136,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
     check_exposure(control, args.control_token)
     replayed = read_events(args.events_in, scene) if args.events_in is not None else []
     watching.feed = LiveFeed(clock.now)
-    daemon = Daemon(scene, overrides, clock, sensors=sensors, workers=workers, on_scan=watching.feed.scan_delivered,
+    daemon = Daemon(scene, overrides, clock, sensors=sensors, workers=workers, worker_nice=args.worker_nice, on_scan=watching.feed.scan_delivered,
                     idle_timeout_s=args.idle_timeout)
     session = LiveSession(daemon, EventWriter(args.events) if args.events is not None else None)
     watching.prepare(daemon, sensors, args.control_token)

@@ -38,7 +38,7 @@ from emulator.daemon.scan_cache import (
     ScanObserver,
     SensorFactory,
 )
-from emulator.daemon.workers import ScanJobFailed, WorkerPool
+from emulator.daemon.workers import WORKER_NICE, ScanJobFailed, WorkerPool
 from emulator.errors import UserError
 from emulator.optics import World
 from emulator.scene.live import ClockChange, LiveEvent, LiveState, event_record
@@ -305,6 +305,7 @@ class Daemon:
         sensor_factory: SensorFactory | None = None,
         device_factory: DeviceFactory = build_device,
         workers: int = 0,
+        worker_nice: int = WORKER_NICE,
         sensors: Sequence[str] | None = None,
         on_scan: ScanObserver | None = None,
         idle_timeout_s: float = IDLE_TIMEOUT_S,
@@ -321,6 +322,7 @@ class Daemon:
         self._device_factory = device_factory
         self._scan_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="scan")
         self._workers = workers if sensor_factory is None else 0  # a supplied scan source stays in-process
+        self._worker_nice = worker_nice
         self.pool: WorkerPool | None = None
         # The world in this process (scans on the scan thread), or only the live changes'
         # record (scans in workers, each applying the same events to its own world).
@@ -371,7 +373,9 @@ class Daemon:
             return self._sensor_factory or simulated_sensors(self.scene, self.world), self._scan_thread
         names = [spec.name for spec, _ in self._plan]
         count = min(self._workers, len(names)) or 1
-        self.pool = WorkerPool(self.scene, [tuple(names[index::count]) for index in range(count)])
+        self.pool = WorkerPool(
+            self.scene, [tuple(names[index::count]) for index in range(count)], nice=self._worker_nice
+        )
         self.pool.start()
         if self._before_workers:  # changes applied before the workers existed (serve --events-in)
             self.pool.apply([event_record(event) for event in self._before_workers])

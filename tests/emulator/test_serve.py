@@ -171,6 +171,8 @@ def test_a_streaming_lms_at_9600_does_not_stall_the_urg(tmp_path: Path) -> None:
         (["railway", "--endpoint", "urg"], "expected SENSOR=URI"),
         (["no-such-scene"], "no-such-scene"),
         (["railway", "--speed", "0"], "--speed must be > 0"),
+        (["railway", "--worker-nice", "20"], "--worker-nice must be 0..19, got 20"),
+        (["railway", "--worker-nice", "-1"], "--worker-nice must be 0..19, got -1"),
     ],
 )
 def test_user_errors_are_one_line_and_exit_2(tmp_path: Path, arguments: list[str], expected: str) -> None:

@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import os
 import signal
+from pathlib import Path
 from concurrent.futures import Future
 
 import numpy as np
 import pytest
 
+from emulator.bench.serve_load import child_pids
+from emulator.bench.serve_process import ServeProcess
 from emulator.daemon.scan_cache import ScanCache
-from emulator.daemon.workers import RemoteSensor, WorkerFailed, WorkerPool
+from emulator.daemon.workers import WORKER_NICE, RemoteSensor, WorkerFailed, WorkerPool
 from emulator.optics import World
 from emulator.scene import load_scene
 from emulator.scene.live import RegionChange, event_record
@@ -40,6 +43,18 @@ def test_worker_scans_equal_in_process_scans(railway_pool) -> None:
         for scan, expected in zip([*batch, alone], [*local.scans(times, **request), local.scan(7.25, **request)]):
             assert scan.time_s == expected.time_s
             np.testing.assert_array_equal(scan.values, expected.values)
+
+
+def _nice_of(pid: int) -> int:
+    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[16])  # field 19: nice
+
+
+def test_workers_compute_at_the_nice_value_asked_and_refuse_one_out_of_range(railway_pool) -> None:
+    _, pool, _ = railway_pool
+    assert [_nice_of(pid) for pid in pool.pids] == [WORKER_NICE, WORKER_NICE] == [19, 19]
+    assert _nice_of(os.getpid()) == 0  # the daemon's own priority is untouched
+    with pytest.raises(ValueError, match="nice value must be 0..19, got 20"):
+        WorkerPool(load_scene("railway"), [("urg",)], nice=20)
 
 
 def test_a_scan_cache_over_workers_serves_a_stream(railway_pool) -> None:
@@ -101,3 +116,10 @@ def test_a_restarted_worker_replays_the_world_events_applied_before_it_died() ->
         np.testing.assert_array_equal(scan.values, local.scan(3.0).values)
     finally:
         pool.close()
+
+
+def test_serve_passes_worker_nice_to_its_workers() -> None:
+    with ServeProcess("railway", ["urg=tcp:127.0.0.1:0"], extra_args=["--workers", "1", "--worker-nice", "7"]) as daemon:
+        workers = [pid for pid in child_pids(daemon.pid) if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes()]
+        assert len(workers) == 1 and _nice_of(workers[0]) == 7
+        assert _nice_of(daemon.pid) == 0
