@@ -15,6 +15,8 @@ object and `lines` are printed in the table. Add a section by adding it to `SECT
   `fraction` is the cost of a steady stream as the daemon computes it
   (`sensor.scans` of SCAN_BATCH consecutive scans, divided by SCAN_BATCH);
   one scan computed alone (a request nobody foresaw) is its own column.
+  `railway-10k` is railway with its plume's rate raised until 10 000 particles
+  are alive at once (rate × lifetime), the plume-at-scale case of issue 16.
 - transport: command latency and MD scan jitter through a served daemon
   (`transport_latency`).
 - lms-rates: LMS200 scans/s per baud and resolution through a served daemon
@@ -54,6 +56,24 @@ Section = tuple[dict, list[str]]
 
 def _scenes() -> list[Scene]:
     return [load_scene(bundled.name) for bundled in bundled_scenes()]
+
+
+DENSE_PLUME_SCENE = "railway"
+DENSE_PLUME_PARTICLES = 10_000
+
+
+def dense_plume_scene() -> Scene:
+    """`railway-10k`: railway with every plume's rate raised so DENSE_PLUME_PARTICLES live at once
+    (rate × lifetime; railway's one plume lives 10 s, so 1000 particles a second): what particles cost at scale."""
+    scene = load_scene(DENSE_PLUME_SCENE)
+    plumes = tuple(dataclasses.replace(plume, rate=DENSE_PLUME_PARTICLES / plume.lifetime / len(scene.plumes)) for plume in scene.plumes)
+    return dataclasses.replace(scene, plumes=plumes)
+
+
+def _scan_scenes() -> list[tuple[str, Scene]]:
+    """The scans section's scenes by label: every bundled scene, then `railway-10k`."""
+    bundled = [(scene.path.stem if scene.path else scene.name, scene) for scene in _scenes()]
+    return [*bundled, (f"{DENSE_PLUME_SCENE}-10k", dense_plume_scene())]
 
 
 def _sensor_beams(scene: Scene, spec: SensorSpec, world: World) -> tuple[np.ndarray, np.ndarray, float]:
@@ -129,7 +149,7 @@ def scans_section(quick: bool) -> Section:
     keep_freed_memory()  # as the daemon's scan workers do: temporaries reused, not faulted in each scan
     times = np.linspace(1.0, 60.0, 5 if quick else 60)
     rows = []
-    for bundled in _scenes():
+    for label, bundled in _scan_scenes():
         for preset in PRESET_MODULES:
             scene = apply_model_override(bundled, preset)
             world = World(scene)
@@ -149,7 +169,7 @@ def scans_section(quick: bool) -> Section:
                 streamed_ms = float(np.mean(streamed)) * 1000.0
                 period_ms = period_s * 1000.0
                 rows.append({
-                    "scene": scene.path.stem if scene.path else scene.name,
+                    "scene": label,
                     "sensor": spec.name,
                     "model": spec.model,
                     "preset": preset,

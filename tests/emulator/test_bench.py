@@ -23,10 +23,13 @@ def test_bench_json_reports_every_bundled_sensor_and_every_section():
 
     specs = {(bundled.name, spec.name): spec for bundled in bundled_scenes() for spec in load_scene(bundled.name).sensors}
     expected = {(scene, name, spec.model) for (scene, name), spec in specs.items()}
-    # every scene and sensor under every preset, once
+    # every scene and sensor under every preset, once; and railway with 10 000 live particles
+    dense = {("railway-10k", name, model) for scene, name, model in expected if scene == "railway"}
     scan_rows = [(row["scene"], row["sensor"], row["model"], row["preset"]) for row in report["scans"]]
     assert len(scan_rows) == len(set(scan_rows))
-    assert set(scan_rows) == {(*key, preset) for key in expected for preset in ("formsma2011", "physical")}
+    assert set(scan_rows) == {(*key, preset) for key in expected | dense for preset in ("formsma2011", "physical")}
+    for scene, name, _ in dense:
+        specs[scene, name] = specs["railway", name]
     for row in report["scans"]:
         assert row["scan_ms"] > 0 and row["max_scan_ms"] >= row["scan_ms"]
         spec = specs[row["scene"], row["sensor"]]
@@ -75,7 +78,9 @@ def test_bench_scans_table_has_a_row_per_sensor_and_preset_with_both_figures():
     assert "stream ms" in lines[1] and "alone ms" in lines[1] and "fraction" in lines[1]
     rows = [line.split() for line in lines[2:] if line.strip()]
     sensors = sum(len(load_scene(bundled.name).sensors) for bundled in bundled_scenes())
-    assert len(rows) == 2 * sensors  # formsma2011 and physical
+    dense = len(load_scene("railway").sensors)  # railway-10k: railway with 10 000 live particles
+    assert len(rows) == 2 * (sensors + dense)  # formsma2011 and physical
+    assert [row[0] for row in rows[-2 * dense :]] == ["railway-10k"] * 2 * dense
     for row in rows:
         streamed, alone, period = float(row[4]), float(row[6]), float(row[8])
         assert streamed > 0 and alone > 0
@@ -85,3 +90,11 @@ def test_bench_scans_table_has_a_row_per_sensor_and_preset_with_both_figures():
 def test_unknown_section_is_a_usage_error():
     result = bench("--section", "warp")
     assert result.returncode == 2 and "warp" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_the_dense_plume_scene_keeps_10000_particles_alive_once_its_plume_is_full():
+    from emulator.bench.sections import dense_plume_scene
+    from emulator.optics import World
+
+    world = World(dense_plume_scene())
+    assert [len(world.particles_at(t)) for t in (20.0, 30.0, 40.0)] == [10_000] * 3
