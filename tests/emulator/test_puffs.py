@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from emulator.optics.puffs import REACH_SIGMAS, BeamPuffCrossings, Puffs, cross_beams
 from emulator.scene.plumes import Particles
@@ -87,6 +89,24 @@ def test_optical_path_to_some_rows_and_unbounded_limits(puffs):
     single = crossings.optical_path_to(limits[:, 0])
     assert single.shape == (720,)
     np.testing.assert_array_equal(single, whole[:, 0])
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), columns=st.integers(2, 5), zero=st.floats(0.0, 1.0), same=st.floats(0.0, 1.0))
+def test_later_limits_equal_to_the_first_or_zero_give_every_limit_its_own_sum_bit_for_bit(puffs, seed, columns, zero, same):
+    """optical_path_to evaluates a later limit only where it is neither 0 nor the first limit again
+    (a footprint's sub-rays mostly are): each column must still equal that column evaluated alone, to the bit."""
+    rng = np.random.default_rng(seed)
+    crossings, _ = _fan_and_brute(puffs, np.full(720, 6.0))
+    limits = rng.uniform(0.0, 6.0, (720, columns))
+    limits[rng.random((720, columns)) < same] = np.inf
+    limits[:, 1:] = np.where(rng.random((720, columns - 1)) < same, limits[:, :1], limits[:, 1:])
+    limits[:, 1:][rng.random((720, columns - 1)) < zero] = 0.0
+    whole = crossings.optical_path_to(limits)
+    for column in range(columns):
+        np.testing.assert_array_equal(whole[:, column], crossings.optical_path_to(limits[:, column]))
+    rows = rng.permutation(720)[: rng.integers(1, 720)]
+    np.testing.assert_array_equal(crossings.optical_path_to(limits[rows], rows), whole[rows])
 
 
 def test_block_cut_of_beams_with_own_origins_keeps_exactly_the_all_pairs_crossings(monkeypatch: pytest.MonkeyPatch) -> None:
