@@ -52,6 +52,7 @@ INITIAL_CAMERA = ((-5.0, -7.0, 7.0), (3.0, 0.0, 0.0))  # behind and above the or
 ERROR_RING_M = 0.3
 ERROR_RGB = (230, 20, 20)
 SCAN_POINT_SIZE = 0.05
+GIZMO_SCALE_M = 1.2  # arrow length; its plane handles sit at 0.14..0.37 of it
 MAX_RANGE_FOR_COLOUR_M = {"urg-04lx": 5.6, "lms200": 20.0}
 log = logging.getLogger(__name__)
 
@@ -212,7 +213,8 @@ class BrowserView:
         for body in self.scene.bodies:
             if isinstance(body.trajectory, Live):
                 gizmo = self._gizmos[body.name] = self.server.scene.add_transform_controls(
-                    f"/gizmos/{body.name}", scale=0.8, position=body.pose.position, wxyz=_wxyz(body.pose.rotation_deg),
+                    f"/gizmos/{body.name}", scale=GIZMO_SCALE_M, depth_test=False,  # on top: not hidden inside the body's solids
+                    position=body.pose.position, wxyz=_wxyz(body.pose.rotation_deg),
                 )
                 gizmo.on_update(self._acting(lambda event, name=body.name: self._drag(name, event)))
         with gui.add_folder("Clock"):
