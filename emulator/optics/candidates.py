@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from emulator.optics.fans import beam_segments, dot_rows, fan_pairs
+from emulator.optics.fans import beam_segments, dot_columns, fan_pairs
 
 PAIRS_PER_CHUNK = 250_000  # beams × particles tested at once by the general test (bounds temporaries)
 
@@ -27,7 +27,7 @@ def candidate_pairs(
     if segments.fan is not None:
         offset = np.subtract(centers.T, origins[0][:, None], order="C")  # (3, P): a row per axis
         beam, particle = fan_pairs(segments.fan, offset, radius, far)
-        along = dot_rows(offset.take(particle, axis=1), segments.fan.directions_by_axis.take(beam, axis=1))
+        along = dot_columns(offset, particle, segments.fan.directions_by_axis, beam)
         in_reach = along - radius.take(particle) <= beam_end.take(beam)
         return beam[in_reach], particle[in_reach]
     near = (~far).nonzero()[0]

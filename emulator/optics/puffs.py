@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from emulator.optics.fans import beam_segments, dot_rows, fan_pairs
+from emulator.optics.fans import beam_segments, dot_columns, dot_rows, fan_pairs
 from emulator.scene.plumes import Particles
 
 SIGMA_PER_EDGE = 1.0 / np.sqrt(2.0 * np.pi)
@@ -262,7 +262,7 @@ def cross_beams(
         offset = np.subtract(puffs.centers.T, origins[0][:, None], order="C")  # (3, P): a row per axis
         beam, puff = fan_pairs(fan, offset, reach_of_puff, far)
         distance_sq = dot_rows(offset, offset).take(puff)
-        along = dot_rows(offset.take(puff, axis=1), fan.directions_by_axis.take(beam, axis=1))
+        along = dot_columns(offset, puff, fan.directions_by_axis, beam)
     else:
         near = (~far).nonzero()[0]
         beam, puff = _block_pairs(origins, directions, beam_end_m, puffs.centers.take(near, axis=0), reach_of_puff.take(near))
