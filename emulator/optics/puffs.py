@@ -175,16 +175,17 @@ class BeamPuffCrossings:
         for previous, current in zip(grid_rows, grid_rows[1:]):
             current += previous
         result += head
+        grid = start_m + fractions[:, None] * length_m  # (F, R): the grid once, not per pair
         inside = past - first
-        ends = inside.cumsum()
-        point = (beam + (first - ends + inside) * count).repeat(inside) + np.arange(0, ends[-1] * count, count)
-        standard = (start_m + fractions[:, None] * length_m).ravel().take(point)  # the grid once, not per pair
-        standard -= along.repeat(inside)
-        standard /= sigma.repeat(inside)
-        contribution = normal_cdf(standard)
-        contribution -= _CDF_HEAD
-        contribution *= column.repeat(inside)
-        result += np.bincount(point, weights=contribution, minlength=count * width).reshape(width, count)
+        for low, high in _row_chunks(beam, inside, count):
+            if low == 0 and high == count:
+                result += _window_sums(grid, beam, first, inside, along, sigma, column)
+                break
+            chunk = ((beam >= low) & (beam < high)).nonzero()[0]
+            result[:, low:high] += _window_sums(
+                np.ascontiguousarray(grid[:, low:high]), beam.take(chunk) - low, first.take(chunk), inside.take(chunk),
+                along.take(chunk), sigma.take(chunk), column.take(chunk),
+            )
         return np.ascontiguousarray(result.T)
 
     def extent_m(self, n_beams: int) -> tuple[np.ndarray, np.ndarray]:
@@ -233,6 +234,42 @@ def _path_to(per_beam: np.ndarray, beam: np.ndarray, along: np.ndarray, sigma: n
     columns = per_beam.shape[1]
     flat_index = (beam[:, None] * columns + np.arange(columns)).ravel() if columns > 1 else beam
     return np.bincount(flat_index, weights=contribution.ravel(), minlength=per_beam.size).reshape(per_beam.shape)
+
+
+POINTS_PER_CHUNK = 1 << 20  # grid points inside puff windows evaluated at once (see _row_chunks)
+
+
+def _row_chunks(beam: np.ndarray, inside: np.ndarray, count: int) -> list[tuple[int, int]]:
+    """Consecutive ranges of the `count` rows, each holding about POINTS_PER_CHUNK of the pairs' window
+    points (`inside` per pair): a dense plume has millions, and temporaries that large are mapped
+    afresh by the allocator (page faults on every scan) where 8 MiB ones are reused. A row's points
+    all fall in one range, summed in the pairs' order, so the sums are those of one pass."""
+    total = int(inside.sum())
+    if total <= POINTS_PER_CHUNK:
+        return [(0, count)]
+    ends = np.bincount(beam, weights=inside, minlength=count).cumsum()
+    cuts = np.unique(ends.searchsorted(np.arange(POINTS_PER_CHUNK, total, POINTS_PER_CHUNK), side="right"))
+    bounds = [0, *(int(cut) for cut in cuts if 0 < cut < count), count]
+    return list(zip(bounds[:-1], bounds[1:]))
+
+
+def _window_sums(
+    grid: np.ndarray, beam: np.ndarray, first: np.ndarray, inside: np.ndarray, along: np.ndarray, sigma: np.ndarray, column: np.ndarray
+) -> np.ndarray:
+    """Each pair's CDF share minus its head at the `inside` grid points from `first` on, summed per point of
+    `grid` (F, R) in the pairs' order → (F, R)."""
+    width, count = grid.shape
+    ends = inside.cumsum()
+    if len(ends) == 0 or ends[-1] == 0:
+        return np.zeros((width, count))
+    point = (beam + (first - ends + inside) * count).repeat(inside) + np.arange(0, ends[-1] * count, count)
+    standard = grid.ravel().take(point)
+    standard -= along.repeat(inside)
+    standard /= sigma.repeat(inside)
+    contribution = normal_cdf(standard)
+    contribution -= _CDF_HEAD
+    contribution *= column.repeat(inside)
+    return np.bincount(point, weights=contribution, minlength=count * width).reshape(width, count)
 
 
 def cross_beams(

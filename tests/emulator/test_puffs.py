@@ -109,6 +109,30 @@ def test_later_limits_equal_to_the_first_or_zero_give_every_limit_its_own_sum_bi
     np.testing.assert_array_equal(crossings.optical_path_to(limits[rows], rows), whole[rows])
 
 
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), chunk=st.integers(1, 3000), rows=st.integers(1, 720))
+def test_the_smoke_grid_in_chunks_of_rows_sums_exactly_as_in_one_pass(puffs, seed, chunk, rows):
+    """A dense plume's window points are summed a range of rows at a time (POINTS_PER_CHUNK): each
+    row's sums must be those of one pass over every point, to the bit, wherever the cuts fall."""
+    import emulator.optics.puffs as puffs_module
+
+    rng = np.random.default_rng(seed)
+    crossings, _ = _fan_and_brute(puffs, np.full(720, 6.0))
+    picked = np.sort(rng.permutation(720)[:rows])
+    start = rng.uniform(0.0, 2.0, rows)
+    length = rng.uniform(0.1, 5.0, rows)
+    fractions = np.concatenate([[0.0], np.cumsum(1.3 ** np.arange(16)) / np.sum(1.3 ** np.arange(16))])
+    one_pass = puffs_module.POINTS_PER_CHUNK
+    try:
+        whole = crossings.optical_path_on_grid(picked, start, length, fractions)
+        puffs_module.POINTS_PER_CHUNK = chunk
+        chunked = crossings.optical_path_on_grid(picked, start, length, fractions)
+    finally:
+        puffs_module.POINTS_PER_CHUNK = one_pass
+    np.testing.assert_array_equal(chunked, whole)
+    assert np.count_nonzero(whole) > 0 or rows < 20
+
+
 def test_block_cut_of_beams_with_own_origins_keeps_exactly_the_all_pairs_crossings(monkeypatch: pytest.MonkeyPatch) -> None:
     """A moving sensor's beams each start elsewhere: the 16-beam block boxes may only drop pairs the exact
     tests drop too, so every crossing (and its order, which sums depend on) equals the all-pairs one."""
