@@ -56,27 +56,32 @@ def euler_quaternion(rotation_deg: np.ndarray) -> np.ndarray:
     )
 
 
-_PRODUCT_TO_MATRIX = np.zeros((16, 9))  # row-major 3x3 from the products q_i q_j (x, y, z, w) of a unit quaternion
-for _row, _terms in enumerate(
-    (
-        ((1, 1, -2), (2, 2, -2)), ((0, 1, 2), (2, 3, -2)), ((0, 2, 2), (1, 3, 2)),
-        ((0, 1, 2), (2, 3, 2)), ((0, 0, -2), (2, 2, -2)), ((1, 2, 2), (0, 3, -2)),
-        ((0, 2, 2), (1, 3, -2)), ((1, 2, 2), (0, 3, 2)), ((0, 0, -2), (1, 1, -2)),
-    )
-):
-    for _i, _j, _weight in _terms:
-        _PRODUCT_TO_MATRIX[4 * _i + _j, _row] += _weight
-_IDENTITY_ROWS = np.eye(3).reshape(9)
+# Each rotation matrix entry (row-major) is the identity's plus w1 q_i q_j + w2 q_k q_l with w = ±2, for a unit quaternion.
+_MATRIX_TERMS = (
+    ((1, 1, -2), (2, 2, -2)), ((0, 1, 2), (2, 3, -2)), ((0, 2, 2), (1, 3, 2)),
+    ((0, 1, 2), (2, 3, 2)), ((0, 0, -2), (2, 2, -2)), ((1, 2, 2), (0, 3, -2)),
+    ((0, 2, 2), (1, 3, -2)), ((1, 2, 2), (0, 3, 2)), ((0, 0, -2), (1, 1, -2)),
+)
+_TERM_LEFT = np.array([terms[k][0] for k in range(2) for terms in _MATRIX_TERMS])  # (18,): the 9 first terms, then the 9 second
+_TERM_RIGHT = np.array([terms[k][1] for k in range(2) for terms in _MATRIX_TERMS])
+_TERM_WEIGHT = np.array([float(terms[k][2]) for k in range(2) for terms in _MATRIX_TERMS])[:, None]
+_IDENTITY_ROWS = np.eye(3).reshape(9, 1)
 
 
 def quaternion_matrix(quaternions: np.ndarray) -> np.ndarray:
     """Rotation matrices (..., 3, 3) of unit quaternions (..., 4), in one pass over all of them.
 
-    einsum, not a BLAS product: each matrix's bits then never depend on how many are computed together.
+    Entry by entry: identity + (w1 q_i q_j + w2 q_k q_l), the products and sums elementwise (no BLAS, no
+    reduction), so each matrix's bits never depend on how many are computed together. Worked on (18, T)
+    rows, one contiguous row per term: far fewer, cheaper passes than a product table per quaternion.
     """
     q = np.asarray(quaternions, dtype=float)
-    products = (q[..., :, None] * q[..., None, :]).reshape(*q.shape[:-1], 16)
-    return (np.einsum("...i,ij->...j", products, _PRODUCT_TO_MATRIX) + _IDENTITY_ROWS).reshape(*q.shape[:-1], 3, 3)
+    by_component = np.ascontiguousarray(q.reshape(-1, 4).T)
+    terms = by_component[_TERM_LEFT] * by_component[_TERM_RIGHT]
+    terms *= _TERM_WEIGHT  # ×±2: exact
+    entries = terms[:9] + terms[9:]
+    entries += _IDENTITY_ROWS
+    return np.ascontiguousarray(entries.T).reshape(*q.shape[:-1], 3, 3)
 
 
 def matrix_quaternion(rotation: np.ndarray) -> np.ndarray:
@@ -113,16 +118,37 @@ def matrix_euler_deg(rotation: np.ndarray) -> tuple[float, float, float]:
 
 def slerp(q0: np.ndarray, q1: np.ndarray, fraction: np.ndarray) -> np.ndarray:
     """Shortest-arc interpolation (T, 4) from q0 (T, 4) to q1 (T, 4) at `fraction` (T,) in [0, 1]."""
+    return _slerp_along(q0, _arcs(q0, q1), fraction)
+
+
+@dataclass(frozen=True)
+class _Arcs:
+    """What slerp from q0 to q1 needs before the fraction (T rows): q1 on q0's half of the sphere
+    (`toward`), the arc between them, its sine, and where that is too small to divide by (`near`)."""
+
+    toward: np.ndarray
+    arc: np.ndarray
+    sin_arc: np.ndarray
+    near: np.ndarray
+
+    def take(self, rows: np.ndarray) -> _Arcs:
+        return _Arcs(self.toward.take(rows, axis=0), self.arc.take(rows), self.sin_arc.take(rows), self.near.take(rows))
+
+
+def _arcs(q0: np.ndarray, q1: np.ndarray) -> _Arcs:
     dot = np.einsum("ij,ij->i", q0, q1)
-    q1 = np.where((dot < 0)[:, None], -q1, q1)
+    toward = np.where((dot < 0)[:, None], -q1, q1)
     dot = np.minimum(np.abs(dot), 1.0)
     arc = np.arccos(dot)
     sin_arc = np.sin(arc)
-    near = sin_arc < _SLERP_LINEAR_BELOW
+    return _Arcs(toward, arc, sin_arc, sin_arc < _SLERP_LINEAR_BELOW)
+
+
+def _slerp_along(q0: np.ndarray, arcs: _Arcs, fraction: np.ndarray) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
-        w0 = np.where(near, 1.0 - fraction, np.sin((1.0 - fraction) * arc) / sin_arc)
-        w1 = np.where(near, fraction, np.sin(fraction * arc) / sin_arc)
-    result = w0[:, None] * q0 + w1[:, None] * q1
+        w0 = np.where(arcs.near, 1.0 - fraction, np.sin((1.0 - fraction) * arcs.arc) / arcs.sin_arc)
+        w1 = np.where(arcs.near, fraction, np.sin(fraction * arcs.arc) / arcs.sin_arc)
+    result = w0[:, None] * q0 + w1[:, None] * arcs.toward
     return result / np.linalg.norm(result, axis=1, keepdims=True)
 
 
@@ -142,6 +168,26 @@ class Keyframes:
         """(K,): whether the pose stays put from row k to row k + 1 (the last row: held for ever)."""
         same = np.all(self.positions[1:] == self.positions[:-1], axis=1) & np.all(self.quaternions[1:] == self.quaternions[:-1], axis=1)
         return np.append(same, True)
+
+    @functools.cached_property
+    def segments(self) -> _Segments:
+        """What interpolating from each row to the next needs, computed once (the trajectory never changes)."""
+        last = len(self.times) - 1
+        start = np.arange(last + 1)
+        end = np.minimum(start + 1, last)
+        return _Segments(
+            self.times[end] - self.times[start], self.positions[end] - self.positions[start], _arcs(self.quaternions[start], self.quaternions[end])
+        )
+
+
+@dataclass(frozen=True)
+class _Segments:
+    """Per keyframe row k, toward row k + 1 (the last row: toward itself): time span (K,), position
+    change (K, 3) and the rotation's arc (`_Arcs`, K rows)."""
+
+    span: np.ndarray
+    delta: np.ndarray
+    arcs: _Arcs
 
 
 @dataclass(frozen=True)
@@ -181,18 +227,18 @@ def keyframe_frames(keyframes: Keyframes, times_s: np.ndarray) -> Frames:
         return Frames(np.broadcast_to(keyframes.positions[still], (len(times), 3)), np.broadcast_to(quaternion_matrix(keyframes.quaternions[still]), (len(times), 3, 3)))
     after = np.searchsorted(keyframes.times, times, side="right") - 1  # the last row at or before t: a jump's later row
     start = np.clip(after, 0, last)
-    end = np.minimum(start + 1, last)
-    span = keyframes.times[end] - keyframes.times[start]
+    segments = keyframes.segments
+    span = segments.span.take(start)
     with np.errstate(divide="ignore", invalid="ignore"):
-        fraction = np.where(span > 0, (times - keyframes.times[start]) / span, 0.0)
+        fraction = np.where(span > 0, (times - keyframes.times.take(start)) / span, 0.0)
     fraction = np.clip(np.where(after < 0, 0.0, fraction), 0.0, 1.0)
-    p0, p1 = keyframes.positions[start], keyframes.positions[end]
-    q0 = keyframes.quaternions[start]
+    p0 = keyframes.positions.take(start, axis=0)
+    q0 = keyframes.quaternions.take(start, axis=0)
     # at a row, or where the body stands still, exactly the row's pose: the same bits as the shortcut above,
     # so an instant's pose never depends on which other instants are evaluated with it
-    exact = ((fraction == 0.0) | keyframes.still_after[start])[:, None]
-    positions = np.where(exact, p0, p0 + fraction[:, None] * (p1 - p0))
-    quaternions = np.where(exact, q0, slerp(q0, keyframes.quaternions[end], fraction))
+    exact = ((fraction == 0.0) | keyframes.still_after.take(start))[:, None]
+    positions = np.where(exact, p0, p0 + fraction[:, None] * segments.delta.take(start, axis=0))
+    quaternions = np.where(exact, q0, _slerp_along(q0, segments.arcs.take(start), fraction))
     return Frames(positions, quaternion_matrix(quaternions))
 
 

@@ -339,3 +339,61 @@ def test_the_shortcut_for_a_body_at_rest_between_movements_gives_the_interpolate
         slow = [keyframe_frames(keyframes, np.array([t, t + 100.0])) for t in times]  # a span that never stands still
         np.testing.assert_allclose(fast.positions, [frames.positions[0] for frames in slow], atol=1e-12)
         np.testing.assert_allclose(fast.rotations, [frames.rotations[0] for frames in slow], atol=1e-12)
+
+
+def _product_table_matrices(quaternions: np.ndarray) -> np.ndarray:
+    """Rotation matrices as a sum over the 16 products q_i q_j weighted by a table (the former way)."""
+    table = np.zeros((16, 9))
+    terms = (
+        ((1, 1, -2), (2, 2, -2)), ((0, 1, 2), (2, 3, -2)), ((0, 2, 2), (1, 3, 2)),
+        ((0, 1, 2), (2, 3, 2)), ((0, 0, -2), (2, 2, -2)), ((1, 2, 2), (0, 3, -2)),
+        ((0, 2, 2), (1, 3, -2)), ((1, 2, 2), (0, 3, 2)), ((0, 0, -2), (1, 1, -2)),
+    )
+    for row, pair in enumerate(terms):
+        for i, j, weight in pair:
+            table[4 * i + j, row] += weight
+    products = (quaternions[..., :, None] * quaternions[..., None, :]).reshape(*quaternions.shape[:-1], 16)
+    return (np.einsum("...i,ij->...j", products, table) + np.eye(3).reshape(9)).reshape(*quaternions.shape[:-1], 3, 3)
+
+
+def test_rotation_matrices_keep_their_bits_whatever_else_is_computed_with_them() -> None:
+    """quaternion_matrix works entry by entry: the same bits as the product table, alone or among
+    thousands, signed zeros included (a scan's poses must not depend on its batch)."""
+    from emulator.scene.bodies import quaternion_matrix
+
+    rng = np.random.default_rng(3)
+    quaternions = rng.normal(size=(5000, 4))
+    quaternions[:1000] /= np.linalg.norm(quaternions[:1000], axis=1, keepdims=True)
+    quaternions[1000:2000][rng.random((1000, 4)) < 0.3] = 0.0
+    quaternions[2000:3000][rng.random((1000, 4)) < 0.3] = -0.0
+    quaternions[3000:3100, :3] = 0.0  # about no axis at all
+    together = quaternion_matrix(quaternions)
+    assert together.shape == (5000, 3, 3)
+    np.testing.assert_array_equal(together.view(np.int64), _product_table_matrices(quaternions).view(np.int64))
+    for index in (0, 1500, 2500, 3050, 4999):
+        np.testing.assert_array_equal(quaternion_matrix(quaternions[index]).view(np.int64), together[index].view(np.int64))
+    np.testing.assert_array_equal(quaternion_matrix(quaternions[:7].reshape(7, 1, 4)).reshape(7, 3, 3), together[:7])
+
+
+def test_keyframe_poses_interpolated_from_kept_segments_have_the_bits_of_interpolating_each_instant() -> None:
+    """Each keyframe segment's arc is computed once; every pose must equal slerping the instant's two
+    rows afresh, bit for bit (a pose's bits feed every beam's range)."""
+    from emulator.scene.bodies import Keyframes, keyframe_frames, quaternion_matrix, slerp
+
+    rng = np.random.default_rng(8)
+    times = np.sort(np.concatenate([rng.uniform(0, 10, 30), [0.0, 0.0, 2.0, 2.0, 10.0]]))
+    keyframes = Keyframes(times, rng.normal(size=(len(times), 3)), euler_quaternion(rng.uniform(-180, 180, (len(times), 3))))
+    instants = np.concatenate([rng.uniform(-1, 11, 3000), times])
+    frames = keyframe_frames(keyframes, instants)
+    after = np.searchsorted(times, instants, side="right") - 1
+    start = np.clip(after, 0, len(times) - 1)
+    end = np.minimum(start + 1, len(times) - 1)
+    span = times[end] - times[start]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fraction = np.clip(np.where(after < 0, 0.0, np.where(span > 0, (instants - times[start]) / span, 0.0)), 0.0, 1.0)
+    exact = ((fraction == 0.0) | keyframes.still_after[start])[:, None]
+    p0, q0 = keyframes.positions[start], keyframes.quaternions[start]
+    positions = np.where(exact, p0, p0 + fraction[:, None] * (keyframes.positions[end] - p0))
+    rotations = quaternion_matrix(np.where(exact, q0, slerp(q0, keyframes.quaternions[end], fraction)))
+    np.testing.assert_array_equal(frames.positions, positions)
+    np.testing.assert_array_equal(frames.rotations, rotations)
