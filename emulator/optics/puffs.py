@@ -307,6 +307,15 @@ def cross_beams(
         offset = (puffs.centers.take(puff, axis=0) - origins.take(beam, axis=0)).T
         distance_sq = dot_rows(offset, offset)
         along = dot_rows(offset, directions.take(beam, axis=0).T)
+    return crossings_of_candidates(puffs, reach_of_puff, beam_end_m, beam, puff, along, distance_sq, row_offset)
+
+
+def crossings_of_candidates(
+    puffs: Puffs, reach_of_puff: np.ndarray, beam_end_m: np.ndarray, beam: np.ndarray, puff: np.ndarray,
+    along: np.ndarray, distance_sq: np.ndarray, row_offset: np.ndarray | None = None,
+) -> BeamPuffCrossings:
+    """`cross_beams`' exact tests on candidate (beam, puff) pairs, given each pair's puff centre's distance
+    along the beam and squared distance from its origin; the pairs kept keep their order."""
     reach = reach_of_puff.take(puff)
     before_end = (along < beam_end_m.take(beam) + reach).nonzero()[0]  # the test that culls: first, on every candidate
     beam, puff, along, distance_sq, reach = beam.take(before_end), puff.take(before_end), along.take(before_end), distance_sq.take(before_end), reach.take(before_end)

@@ -20,6 +20,7 @@ import numpy as np
 
 from emulator.optics import BeamHits, World
 from emulator.optics.hits import RegionCrossing
+from emulator.optics.instant_puffs import cross_instants
 from emulator.optics.kept import KeptPerArrays
 from emulator.optics.puffs import BeamPuffCrossings, Puffs, cross_beams
 from emulator.scene.material_optics import optics_for, patch_values
@@ -129,14 +130,8 @@ class Instants:
         """Every instant's puffs against the beams in one pass; pairs name stacked rows."""
         world, n = self.beams.world, self.beam_count
         parts = [Puffs.from_particles(world.particles_at(time_s)) for time_s in self.times_s]
-        if self.per_instant is not None:  # each instant's own beams: crossed one instant at a time
-            crossed = [
-                cross_beams(puffs, b.origins, b.directions, h.beam_end_m) for puffs, (h, b) in zip(parts, self.per_instant)
-            ]
-            return BeamPuffCrossings(
-                np.concatenate([c.beam + k * n for k, c in enumerate(crossed)]),
-                *(np.concatenate([getattr(c, name) for c in crossed]) for name in ("along_m", "sigma", "column", "before_origin")),
-            )
+        if self.per_instant is not None:  # each instant's own beams (a moving sensor): all instants in one pass
+            return cross_instants(parts, self.beams.origins, self.beams.directions, self.hits.beam_end_m)
         offsets = np.repeat(np.arange(self.count) * n, [len(part) for part in parts]) if self.count > 1 else None
         return cross_beams(Puffs.concatenate(parts), self.beams.origins, self.beams.directions, self.hits.beam_end_m, offsets)
 
