@@ -10,6 +10,8 @@ negative when the origin is inside (the caller clips to the beam).
 
 from __future__ import annotations
 
+from typing import Iterable
+
 import numpy as np
 import trimesh
 
@@ -87,11 +89,26 @@ def paired_cube_intervals_by_axis(
     origin lies outside that axis's slab. The bounds are combined in the order
     of the axes, so the result is the same whatever the layout.
     """
+    with np.errstate(divide="ignore", over="ignore"):  # d is 0 or so small that 1/d overflows: inf
+        per_axis = ((np.divide(1.0, directions[axis]), np.subtract(centers[axis], origins[axis])) for axis in range(3))
+        return _cube_intervals(per_axis, half_sizes)
+
+
+def gathered_cube_intervals(
+    inverse_directions: np.ndarray, center_offsets: np.ndarray, half_sizes: np.ndarray, ray: np.ndarray, cube: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """`paired_cube_intervals_by_axis` of pairs (ray[k], cube[k]) of rays from one origin, given per ray
+    1 / direction (3, N) and per cube its centre − the origin (3, M) and half edge (M,): the division
+    and the subtraction once per ray and per cube instead of once per pair, the same values."""
+    per_axis = ((inverse_directions[axis].take(ray), center_offsets[axis].take(cube)) for axis in range(3))
+    return _cube_intervals(per_axis, half_sizes.take(cube))
+
+
+def _cube_intervals(per_axis: Iterable[tuple[np.ndarray, np.ndarray]], half_sizes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The slab test from each axis's (1 / direction, centre − origin) per pair (see paired_cube_intervals_by_axis)."""
     near = far = outside = None
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        for axis in range(3):
-            inverse = np.divide(1.0, directions[axis])
-            offset = np.subtract(centers[axis], origins[axis])
+    with np.errstate(invalid="ignore", over="ignore"):
+        for inverse, offset in per_axis:
             middle = offset * inverse
             spread = np.abs(inverse)
             spread *= half_sizes

@@ -21,7 +21,8 @@ from emulator.optics.kept import KeptPerArrays
 class Fan:
     """A fan's plane (`first`, `second` in it, `normal`) and its beams' angles in it, ascending;
     `axes_by_row` (3, 3, 1) holds (normal, first, second) as columns, to project (3, P) offsets in one pass;
-    `directions_by_axis` (3, N) the beams' directions, one contiguous row per axis."""
+    `directions_by_axis` (3, N) the beams' directions, one contiguous row per axis, and
+    `inverse_directions_by_axis` (3, N) their reciprocals (inf where a component is 0), as the slab test needs."""
 
     first: np.ndarray
     second: np.ndarray
@@ -29,6 +30,7 @@ class Fan:
     beam_angle: np.ndarray
     axes_by_row: np.ndarray
     directions_by_axis: np.ndarray
+    inverse_directions_by_axis: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -136,9 +138,11 @@ def _fan_geometry(origins: np.ndarray, directions: np.ndarray) -> Fan | None:
         return None
     axes_by_row = np.stack([normal, first, second], axis=1)[:, :, None]
     directions_by_axis = np.ascontiguousarray(directions.T)
-    for array in (first, second, normal, beam_angle, axes_by_row, directions_by_axis):
+    with np.errstate(divide="ignore", over="ignore"):  # a component of 0 or so small that 1/d overflows: inf
+        inverse_directions_by_axis = np.divide(1.0, directions_by_axis)
+    for array in (first, second, normal, beam_angle, axes_by_row, directions_by_axis, inverse_directions_by_axis):
         array.flags.writeable = False  # kept and shared by later scans
-    return Fan(first, second, normal, beam_angle, axes_by_row, directions_by_axis)
+    return Fan(first, second, normal, beam_angle, axes_by_row, directions_by_axis, inverse_directions_by_axis)
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:

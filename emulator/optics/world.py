@@ -28,7 +28,8 @@ from embreex.rtcore_scene import EmbreeScene
 
 from emulator.errors import SceneError
 from emulator.optics.candidates import candidate_pairs
-from emulator.optics.chords import NO_HIT, paired_cube_intervals_by_axis, shape_intervals
+from emulator.optics.fans import beam_segments
+from emulator.optics.chords import NO_HIT, gathered_cube_intervals, paired_cube_intervals_by_axis, shape_intervals
 from emulator.optics.hits import BeamHits, PreparedBeams, RegionCrossing
 from emulator.optics.moving import MovingSolids, Solids, exact_hits, triangle_planes
 from emulator.scene.bodies import BodyPoses, mounted_matrix
@@ -236,12 +237,17 @@ class World:
         beam, particle = candidate_pairs(
             origins, directions, beam_end, particles.centers, particles.half_sizes * np.sqrt(3.0)
         )
-        entry, exit_ = paired_cube_intervals_by_axis(
-            np.ascontiguousarray(origins.T).take(beam, axis=1),
-            np.ascontiguousarray(directions.T).take(beam, axis=1),
-            np.ascontiguousarray(particles.centers.T).take(particle, axis=1),
-            particles.half_sizes.take(particle),
-        )
+        fan = beam_segments(origins, directions, beam_end).fan  # kept: candidate_pairs just asked for it
+        if fan is not None:  # one origin: each beam's 1/direction and each box's offset once, not per pair
+            offsets = np.subtract(particles.centers.T, origins[0][:, None], order="C")
+            entry, exit_ = gathered_cube_intervals(fan.inverse_directions_by_axis, offsets, particles.half_sizes, beam, particle)
+        else:
+            entry, exit_ = paired_cube_intervals_by_axis(
+                np.ascontiguousarray(origins.T).take(beam, axis=1),
+                np.ascontiguousarray(directions.T).take(beam, axis=1),
+                np.ascontiguousarray(particles.centers.T).take(particle, axis=1),
+                particles.half_sizes.take(particle),
+            )
         entry = np.maximum(entry, 0.0)
         met = (exit_ >= entry) & (entry < beam_end[beam])
         beam, particle, entry = beam[met], particle[met], entry[met]

@@ -56,3 +56,35 @@ def test_beams_from_several_origins_are_no_fan_and_still_find_their_pairs():
     found = set(zip(beam.tolist(), cube.tolist()))
     assert _exact_pairs(origins, directions, beam_end, centers, half) <= found
     assert {c for _, c in found} == {0, 1}  # the cube behind the fan is culled
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), axis_aligned=st.booleans(), pairs=st.integers(0, 400))
+def test_the_slab_test_from_per_ray_and_per_cube_values_gives_the_same_bits(seed, axis_aligned, pairs):
+    """A fan's slab test takes 1/direction per beam and centre − origin per box (gathered_cube_intervals):
+    every pair's entry and exit must be those of the per-pair test, to the bit, also for beams along an
+    axis (1/0 = inf) and origins inside boxes."""
+    from emulator.optics.chords import gathered_cube_intervals, paired_cube_intervals_by_axis
+
+    rng = np.random.default_rng(seed)
+    origin = rng.uniform(-2.0, 2.0, 3)
+    directions = rng.normal(size=(90, 3))
+    if axis_aligned:
+        directions[rng.random((90, 3)) < 0.3] = 0.0
+        directions[np.all(directions == 0.0, axis=1), 0] = 1.0
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    centers = origin + rng.uniform(-3.0, 3.0, (40, 3))
+    centers[:5] = origin + rng.uniform(-0.1, 0.1, (5, 3))  # around the origin
+    half = rng.uniform(0.01, 0.8, 40)
+    ray, cube = rng.integers(0, 90, pairs), rng.integers(0, 40, pairs)
+    with np.errstate(divide="ignore"):
+        inverse = np.divide(1.0, np.ascontiguousarray(directions.T))
+    offsets = np.subtract(centers.T, origin[:, None], order="C")
+    gathered = gathered_cube_intervals(inverse, offsets, half, ray, cube)
+    paired = paired_cube_intervals_by_axis(
+        np.tile(origin[:, None], (1, pairs)), directions.T[:, ray], centers.T[:, cube], half[cube]
+    )
+    np.testing.assert_array_equal(gathered[0], paired[0])
+    np.testing.assert_array_equal(gathered[1], paired[1])
+    if pairs > 100:
+        assert np.isfinite(paired[0]).any()  # some pairs meet
