@@ -42,9 +42,14 @@ class Segments:
     fan: Fan | None
 
     def far_from(self, centers: np.ndarray, radius: np.ndarray) -> np.ndarray:
-        """Which spheres lie wholly outside the box bounding all beam segments."""
-        reach = radius[:, None]
-        return np.logical_or.reduce((centers + reach < self.lower) | (centers - reach > self.upper), axis=1)
+        """Which spheres lie wholly outside the box bounding all beam segments (an axis at a time:
+        a reduction across the (P, 3) array's short rows costs several times more)."""
+        far = np.zeros(len(radius), dtype=bool)
+        for axis in range(3):
+            center = centers[:, axis]
+            far |= center + radius < self.lower[axis]
+            far |= center - radius > self.upper[axis]
+        return far
 
 
 _SEGMENTS = KeptPerArrays()
@@ -64,18 +69,25 @@ def fan_pairs(fan: Fan, offset: np.ndarray, radius: np.ndarray, skip: np.ndarray
     origin and `radius` (P,): the beams within each sphere's angular reach, grouped by sphere,
     ascending; none for spheres in `skip`. Whether a sphere starts before a beam's end is left to the caller."""
     beam_angle, axes = fan.beam_angle, fan.axes_by_row
-    # each row as _dot computes it: o0·a0 + o1·a1 + o2·a2
-    height, x, y = offset[0] * axes[0] + offset[1] * axes[1] + offset[2] * axes[2]
+    # each row as _dot computes it: o0·a0 + o1·a1 + o2·a2; the angles only for spheres the plane cuts
+    height = offset[0] * axes[0, 0] + offset[1] * axes[1, 0] + offset[2] * axes[2, 0]
+    cut = np.abs(height) < radius
+    cut &= ~skip
+    live = cut.nonzero()[0]
+    if len(live) < len(radius):
+        offset, radius, height = offset.take(live, axis=1), radius.take(live), height.take(live)
+    x = offset[0] * axes[0, 1] + offset[1] * axes[1, 1] + offset[2] * axes[2, 1]
+    y = offset[0] * axes[0, 2] + offset[1] * axes[1, 2] + offset[2] * axes[2, 2]
     in_plane = np.sqrt(np.maximum(radius * radius - height * height, 0.0))
     distance = np.hypot(x, y)
     around_origin = distance <= in_plane  # every beam's angle: set below, whatever half_width says
     half_width = np.arcsin(np.minimum(in_plane, distance) / np.maximum(distance, _TINIEST))  # never 0 / 0
     centre = np.arctan2(y, x)
-    skipped = np.abs(height) >= radius
-    skipped |= skip
     lower_edge, upper_edge = centre - half_width, centre + half_width
     # an interval reaching past ±pi may hold beams one turn away (checked with a margin: a needless turn adds no pairs)
-    wraps = upper_edge.max() > beam_angle[0] + (2.0 * np.pi - 1e-9) or lower_edge.min() < beam_angle[-1] - (2.0 * np.pi - 1e-9)
+    wraps = len(live) > 0 and (
+        upper_edge.max() > beam_angle[0] + (2.0 * np.pi - 1e-9) or lower_edge.min() < beam_angle[-1] - (2.0 * np.pi - 1e-9)
+    )
     beams, sphere_of = [], []
     for turn in (-2.0 * np.pi, 0.0, 2.0 * np.pi) if wraps else (0.0,):
         low = beam_angle.searchsorted(centre + turn - half_width if turn else lower_edge, side="left")
@@ -85,8 +97,7 @@ def fan_pairs(fan: Fan, offset: np.ndarray, radius: np.ndarray, skip: np.ndarray
         else:
             low[around_origin], high[around_origin] = 0, len(beam_angle)
         counts = high - low
-        counts[skipped] = 0
-        sphere_of.append(np.arange(len(counts)).repeat(counts))
+        sphere_of.append(live.repeat(counts))
         beams.append((low + counts - counts.cumsum()).repeat(counts) + np.arange(len(sphere_of[-1])))
     if len(beams) == 1:
         return beams[0], sphere_of[0]
