@@ -397,3 +397,33 @@ def test_keyframe_poses_interpolated_from_kept_segments_have_the_bits_of_interpo
     rotations = quaternion_matrix(np.where(exact, q0, slerp(q0, keyframes.quaternions[end], fraction)))
     np.testing.assert_array_equal(frames.positions, positions)
     np.testing.assert_array_equal(frames.rotations, rotations)
+
+
+def test_only_beams_that_pass_near_a_moving_body_are_cast_at_it_and_every_hit_is_still_found(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The sphere around a body's origin that bounds its objects picks the beams cast in its frame;
+    the hits must be those of casting every beam, grazing and end-on beams included."""
+    import emulator.optics.moving as moving
+
+    door = (
+        '[[bodies]]\nname = "door"\nposition = [3, 1, 0]\n'
+        "trajectory = { keyframes = [[0, 3, 1, 0, 0, 0, 0], [1, 3, 1, 0.5, 10, 0, 90], [2, 2, 2, 0, 0, 20, 200]] }\n"
+        '[[objects]]\nname = "panel"\nbody = "door"\nbox = { size = [0.05, 1.2, 2] }\nposition = [0.6, 0, 1]\n'
+        '[[objects]]\nname = "knob"\nbody = "door"\nsphere = { radius = 0.05 }\nposition = [1.1, 0.1, 1]\n'
+    )
+    world = World(scene_of(tmp_path, door + WALL + RIDER.replace('body = "robot"\n', "")))
+    rng = np.random.default_rng(4)
+    count = 20000
+    origins = rng.uniform([-2, -3, -1], [8, 5, 3], (count, 3))
+    targets = np.array([3.6, 1.0, 1.0]) + rng.normal(size=(count, 3)) * rng.choice([0.01, 0.3, 1.5], (count, 1))
+    directions = targets - origins
+    directions[: count // 4, 2] = 0.0  # level beams, as a scanner's
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    times = rng.choice([0.0, 0.5, 1.0, 1.7, 3.0], count) + rng.uniform(0, 0.01, count)
+    picked = world.solids(origins, directions, 8.0, 0.0, times)
+    assert np.sum(picked.object_index == 0) > 1000 and np.sum(picked.object_index == 1) >= 5  # panel and knob met
+    monkeypatch.setattr(moving, "_passing_within", lambda centers, radius, o, d, length: np.ones(len(o), dtype=bool))
+    every = world.solids(origins, directions, 8.0, 0.0, times)
+    for name in ("range_m", "object_index", "reflectivity", "cos_incidence"):
+        np.testing.assert_array_equal(getattr(picked, name), getattr(every, name), err_msg=name)
