@@ -41,14 +41,23 @@ def field_code(code: int, field_bits: int) -> int:
     return code + (1 << field_bits) - (1 << 13)
 
 
-def reflector_echoes(scene: Scene, hits: BeamHits, values: np.ndarray, unit: str, field_bits: int) -> np.ndarray:
-    """Per beam: its value is a distance measured on a retro-reflective material (the
-    LMS200's reflector bits; the protocol only encodes them)."""
-    retro = np.array([scene.materials[obj.material].retroreflective for obj in scene.objects] + [False])
-    index = np.where((hits.object_index >= 0) & (hits.object_index < len(scene.objects)), hits.object_index, -1)
+def retroreflective_objects(scene: Scene) -> np.ndarray:
+    """Per scene object, whether its material is retro-reflective, plus a last False for "nothing hit"."""
+    return np.array([scene.materials[obj.material].retroreflective for obj in scene.objects] + [False])
+
+
+def reflector_echoes(
+    retroreflective: np.ndarray, hits: Sequence[BeamHits], values: np.ndarray, unit: str, field_bits: int
+) -> np.ndarray:
+    """Per scan (one per `hits`, rows of `values` (K, N)) and beam: its value is a distance measured on a
+    retro-reflective material (`retroreflective_objects`; the LMS200's reflector bits: the protocol only
+    encodes them)."""
+    objects = np.concatenate([hit.object_index for hit in hits]).reshape(values.shape)
+    solid_range_m = np.concatenate([hit.solid_range_m for hit in hits]).reshape(values.shape)
+    index = np.where((objects >= 0) & (objects < len(retroreflective) - 1), objects, -1)
     distance = values < field_code(ABOVE_MAXIMUM, field_bits)
-    at_surface = np.abs(values / UNITS_PER_M[unit] - hits.solid_range_m) <= REFLECTOR_MATCH_M
-    return retro[index] & distance & at_surface
+    at_surface = np.abs(values / UNITS_PER_M[unit] - solid_range_m) <= REFLECTOR_MATCH_M
+    return retroreflective[index] & distance & at_surface
 
 
 def device_angles_deg(start_deg: float, step_deg: float, count: int) -> np.ndarray:
@@ -115,6 +124,7 @@ class LmsSensor:
         self.mount = SensorMount(scene, spec, world.bodies)
         self._fixed_spec = self.mount.fixed_spec
         self._rays: dict[tuple[float, float, int], _Window] = {}
+        self._retroreflective = retroreflective_objects(scene)
 
     def _beams(self, start_deg: float, step_deg: float, count: int) -> _Window:
         """A window's angles, offsets and (fixed sensor) beams prepared against the fixed geometry
@@ -180,10 +190,8 @@ class LmsSensor:
         hits, beams = zip(*casts) if casts else ((), ())
         values = values_at_instants(self._response, "lms_values", hits, beams, unit, field_bits=field_bits)
         values = values.astype(np.int64, copy=False)
-        return [
-            Scan(self.name, MODEL, t, window.angles_rad, row, unit, reflector_echoes(self.scene, hit, row, unit, field_bits))
-            for t, row, hit in zip(times_s, values, hits)
-        ]
+        reflector = reflector_echoes(self._retroreflective, hits, values, unit, field_bits) if hits else values.astype(bool)
+        return [Scan(self.name, MODEL, t, window.angles_rad, row, unit, echo) for t, row, echo in zip(times_s, values, reflector)]
 
     def configured_scan(self, time_s: float) -> Scan:
         """The scan the scene's options select (`configured_window`), at `time_s`."""
