@@ -208,10 +208,14 @@ class Frames:
     rotations: np.ndarray
 
     def then(self, local: Pose) -> Frames:
-        """The frames of something mounted at `local` in these frames (a sensor on a body)."""
-        rotation = local.rotation_matrix()
-        positions = self.positions + self.rotations @ np.asarray(local.position, dtype=float)
-        return Frames(positions, self.rotations @ rotation)
+        """The frames of something mounted at `local` in these frames (a sensor on a body).
+
+        The T rotations' rows as one (3T, 3) matrix: one BLAS product instead of T (numpy's stacked
+        matmul calls BLAS once per matrix); each row is the same dot product either way (tested).
+        """
+        rows = np.reshape(self.rotations, (-1, 3))
+        positions = self.positions + (rows @ np.asarray(local.position, dtype=float)).reshape(-1, 3)
+        return Frames(positions, (rows @ local.rotation_matrix()).reshape(-1, 3, 3))
 
     def at(self, index: int) -> Pose:
         """Instant `index` as a `Pose` (position, roll/pitch/yaw in degrees)."""

@@ -427,3 +427,21 @@ def test_only_beams_that_pass_near_a_moving_body_are_cast_at_it_and_every_hit_is
     every = world.solids(origins, directions, 8.0, 0.0, times)
     for name in ("range_m", "object_index", "reflectivity", "cos_incidence"):
         np.testing.assert_array_equal(getattr(picked, name), getattr(every, name), err_msg=name)
+
+
+def test_a_mounted_frame_has_the_bits_of_mounting_at_each_instant_alone() -> None:
+    """`Frames.then` composes all instants in one product: each must equal its own 3x3 product."""
+    from emulator.scene.bodies import Frames, quaternion_matrix
+
+    rng = np.random.default_rng(9)
+    local = Pose((0.05, -0.13, 0.55), (3.0, -7.0, 110.0))
+    position, rotation = np.asarray(local.position), local.rotation_matrix()
+    for count in (1, 2, 3, 7, 361, 2888):
+        rotations = quaternion_matrix(rng.normal(size=(count, 4)) / 2.0)
+        origins = rng.normal(size=(count, 3))
+        frames = Frames(origins, rotations).then(local)
+        for index in range(0, count, max(1, count // 50)):
+            np.testing.assert_array_equal(frames.positions[index], origins[index] + rotations[index] @ position)
+            np.testing.assert_array_equal(frames.rotations[index], rotations[index] @ rotation)
+    still = Frames(np.broadcast_to([1.0, 2.0, 0.0], (5, 3)), np.broadcast_to(quaternion_matrix(np.array([0.0, 0.0, 0.6, 0.8])), (5, 3, 3))).then(local)
+    np.testing.assert_array_equal(still.rotations, np.broadcast_to(still.rotations[0], (5, 3, 3)))
