@@ -317,8 +317,10 @@ def crossings_of_candidates(
     """`cross_beams`' exact tests on candidate (beam, puff) pairs, given each pair's puff centre's distance
     along the beam and squared distance from its origin; the pairs kept keep their order."""
     reach = reach_of_puff.take(puff)
-    before_end = (along < beam_end_m.take(beam) + reach).nonzero()[0]  # the test that culls: first, on every candidate
-    beam, puff, along, distance_sq, reach = beam.take(before_end), puff.take(before_end), along.take(before_end), distance_sq.take(before_end), reach.take(before_end)
+    before_end = along < beam_end_m.take(beam) + reach  # the test that culls: first, on every candidate
+    if not before_end.all():  # often every candidate does (a plume in front of the solids): nothing to take
+        before_end = before_end.nonzero()[0]
+        beam, puff, along, distance_sq, reach = beam.take(before_end), puff.take(before_end), along.take(before_end), distance_sq.take(before_end), reach.take(before_end)
     reach_sq = reach * reach
     miss_sq = np.maximum(distance_sq - along * along, 0.0)
     ahead = (along > 0) | (distance_sq < reach_sq)  # a puff behind the origin and out of reach adds < 0.2 %
