@@ -17,11 +17,12 @@ PAIRS_PER_CHUNK = 250_000  # beams × particles tested at once by the general te
 
 def candidate_pairs(
     origins: np.ndarray, directions: np.ndarray, beam_end: np.ndarray, centers: np.ndarray, radius: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """(beam, particle) index arrays: every pair whose bounding sphere the beam may cross before its end."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(beam, particle) index arrays of every pair whose bounding sphere the beam may cross before its
+    end, and each pair's sphere centre's distance along the beam."""
     nothing = np.zeros(0, dtype=np.int64)
     if len(origins) == 0 or len(centers) == 0:
-        return nothing, nothing
+        return nothing, nothing, np.zeros(0)
     segments = beam_segments(origins, directions, beam_end)
     far = segments.far_from(centers, radius)
     if segments.fan is not None:
@@ -29,21 +30,22 @@ def candidate_pairs(
         beam, particle = fan_pairs(segments.fan, offset, radius, far)
         along = dot_columns(offset, particle, segments.fan.directions_by_axis, beam)
         in_reach = along - radius.take(particle) <= beam_end.take(beam)
-        return beam[in_reach], particle[in_reach]
+        return beam[in_reach], particle[in_reach], along[in_reach]
     near = (~far).nonzero()[0]
     step = max(1, PAIRS_PER_CHUNK // len(origins))
-    beams, particles = [nothing], [nothing]
+    beams, particles, alongs = [nothing], [nothing], [np.zeros(0)]
     for start in range(0, len(near), step):
         chunk = near[start : start + step]
-        beam, particle = _sphere_pairs(origins, directions, beam_end, centers[chunk], radius[chunk])
+        beam, particle, along = _sphere_pairs(origins, directions, beam_end, centers[chunk], radius[chunk])
         beams.append(beam)
         particles.append(chunk[particle])
-    return np.concatenate(beams), np.concatenate(particles)
+        alongs.append(along)
+    return np.concatenate(beams), np.concatenate(particles), np.concatenate(alongs)
 
 
 def _sphere_pairs(
     origins: np.ndarray, directions: np.ndarray, beam_end: np.ndarray, centers: np.ndarray, radius: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every beam against every sphere: the perpendicular distance and the extent along the beam."""
     origin_along = np.einsum("ij,ij->i", origins, directions)
     along = directions @ centers.T - origin_along[:, None]
@@ -52,8 +54,9 @@ def _sphere_pairs(
         - 2.0 * (origins @ centers.T)
         + np.einsum("ij,ij->i", origins, origins)[:, None]
     )
-    return np.nonzero(
+    beam, sphere = np.nonzero(
         (distance_squared - along * along <= (radius * radius)[None, :] + 1e-9)
         & (along >= -radius[None, :])
         & (along <= beam_end[:, None] + radius[None, :])
     )
+    return beam, sphere, along[beam, sphere]

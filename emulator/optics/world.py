@@ -29,6 +29,7 @@ from embreex.rtcore_scene import EmbreeScene
 from emulator.errors import SceneError
 from emulator.optics.candidates import candidate_pairs
 from emulator.optics.fans import beam_segments
+from emulator.optics.first_boxes import first_boxes
 from emulator.optics.chords import NO_HIT, gathered_cube_intervals, paired_cube_intervals_by_axis, shape_intervals
 from emulator.optics.hits import BeamHits, PreparedBeams, RegionCrossing
 from emulator.optics.moving import MovingSolids, Solids, exact_hits, triangle_planes
@@ -227,31 +228,29 @@ class World:
         """Entry distance and density of the first particle box before each beam's end.
 
         The particles' bounding spheres pick candidate pairs (`candidates.py`);
-        the exact slab test runs on those only.
+        the exact slab test runs on those that can come first (`first_boxes.py`).
         """
-        first_range = np.full(len(origins), np.inf)
-        first_density = np.zeros(len(origins))
         particles = self.particles_at(time_s)
         if len(particles) == 0 or len(origins) == 0:
-            return first_range, first_density
-        beam, particle = candidate_pairs(
-            origins, directions, beam_end, particles.centers, particles.half_sizes * np.sqrt(3.0)
-        )
+            return np.full(len(origins), np.inf), np.zeros(len(origins))
+        radius = particles.half_sizes * np.sqrt(3.0)
+        beam, particle, along = candidate_pairs(origins, directions, beam_end, particles.centers, radius)
         fan = beam_segments(origins, directions, beam_end).fan  # kept: candidate_pairs just asked for it
         if fan is not None:  # one origin: each beam's 1/direction and each box's offset once, not per pair
             offsets = np.subtract(particles.centers.T, origins[0][:, None], order="C")
-            entry, exit_ = gathered_cube_intervals(fan.inverse_directions_by_axis, offsets, particles.half_sizes, beam, particle)
+
+            def intervals(pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                return gathered_cube_intervals(
+                    fan.inverse_directions_by_axis, offsets, particles.half_sizes, beam.take(pairs), particle.take(pairs)
+                )
         else:
-            entry, exit_ = paired_cube_intervals_by_axis(
-                np.ascontiguousarray(origins.T).take(beam, axis=1),
-                np.ascontiguousarray(directions.T).take(beam, axis=1),
-                np.ascontiguousarray(particles.centers.T).take(particle, axis=1),
-                particles.half_sizes.take(particle),
-            )
-        entry = np.maximum(entry, 0.0)
-        met = (exit_ >= entry) & (entry < beam_end[beam])
-        beam, particle, entry = beam[met], particle[met], entry[met]
-        np.minimum.at(first_range, beam, entry)
-        first = entry == first_range[beam]  # each beam's first particle (of a tie, the last listed)
-        first_density[beam[first]] = particles.density[particle[first]]
-        return first_range, first_density
+            origins_by_axis, directions_by_axis = np.ascontiguousarray(origins.T), np.ascontiguousarray(directions.T)
+            centers_by_axis = np.ascontiguousarray(particles.centers.T)
+
+            def intervals(pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                beams, boxes = beam.take(pairs), particle.take(pairs)
+                return paired_cube_intervals_by_axis(
+                    origins_by_axis.take(beams, axis=1), directions_by_axis.take(beams, axis=1),
+                    centers_by_axis.take(boxes, axis=1), particles.half_sizes.take(boxes),
+                )
+        return first_boxes(beam, particle, along - radius.take(particle), intervals, beam_end, particles.density)

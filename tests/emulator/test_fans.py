@@ -41,7 +41,7 @@ def test_fan_candidates_hold_every_pair_the_slab_test_finds(seed, span, start, c
     centers = origin + rng.uniform(-6.0, 6.0, (cubes, 3)) * np.array([1.0, 1.0, 0.1])
     half = rng.uniform(0.01, 0.8, cubes)
     assert beam_segments(origins, directions, beam_end).fan is not None  # the fan path is what is tested
-    beam, cube = candidate_pairs(origins, directions, beam_end, centers, half * np.sqrt(3.0))
+    beam, cube, _ = candidate_pairs(origins, directions, beam_end, centers, half * np.sqrt(3.0))
     assert _exact_pairs(origins, directions, beam_end, centers, half) <= set(zip(beam.tolist(), cube.tolist()))
 
 
@@ -52,7 +52,7 @@ def test_beams_from_several_origins_are_no_fan_and_still_find_their_pairs():
     centers = np.array([[3.0, 0.0, 0.0], [2.6, 1.5, 0.0], [-3.0, 0.0, 0.0]])
     half = np.full(3, 0.3)
     assert beam_segments(origins, directions, beam_end).fan is None
-    beam, cube = candidate_pairs(origins, directions, beam_end, centers, half * np.sqrt(3.0))
+    beam, cube, _ = candidate_pairs(origins, directions, beam_end, centers, half * np.sqrt(3.0))
     found = set(zip(beam.tolist(), cube.tolist()))
     assert _exact_pairs(origins, directions, beam_end, centers, half) <= found
     assert {c for _, c in found} == {0, 1}  # the cube behind the fan is culled
