@@ -92,10 +92,10 @@ def _cross_together(
     near = (~far).nonzero()[0]  # instant-major, puffs ascending
     beam, puff = _block_pairs(low_ends, high_ends, n, count, puffs.centers.take(near, axis=0), reach_of_puff.take(near), instant_of_puff.take(near))
     puff = near.take(puff)
-    offset = (puffs.centers.take(puff, axis=0) - origins.take(beam, axis=0)).T
-    return crossings_of_candidates(
-        puffs, reach_of_puff, beam_end_m, beam, puff, dot_rows(offset, directions.take(beam, axis=0).T), dot_rows(offset, offset)
-    )
+    # (3, pairs) a contiguous row per axis: gathers and sums cheaper than on (pairs, 3), the same values
+    offset = np.ascontiguousarray(puffs.centers.T).take(puff, axis=1) - np.ascontiguousarray(origins.T).take(beam, axis=1)
+    along = dot_rows(offset, np.ascontiguousarray(directions.T).take(beam, axis=1))
+    return crossings_of_candidates(puffs, reach_of_puff, beam_end_m, beam, puff, along, dot_rows(offset, offset))
 
 
 def _block_pairs(
@@ -125,12 +125,12 @@ def _block_pairs(
         outside |= low > high_side
         outside |= high < low_side
     pair_instant, pair_block, pair_slot = (~outside).nonzero()  # instant-major, block-major, puffs ascending
-    group = pair_instant * blocks + pair_block
-    per_block = np.bincount(group, minlength=count * blocks)
-    width = np.tile(np.minimum(BEAMS_PER_BLOCK, n - np.arange(blocks) * BEAMS_PER_BLOCK), count)
-    sizes = width * per_block
-    within = np.arange(int(sizes.sum())) - (sizes.cumsum() - sizes).repeat(sizes)
-    count_in_block = per_block.repeat(sizes)
-    beam = block_starts.repeat(sizes) + within // count_in_block
+    per_block = np.bincount(pair_instant * blocks + pair_block, minlength=count * blocks)
+    # every beam in turn (blocks tile the rows in order), each with all its block's puffs: no division
+    widths = np.diff(np.append(block_starts, count * n))
+    puffs_of_row = per_block.repeat(widths)
+    beam = np.arange(count * n).repeat(puffs_of_row)
+    first_pair = (per_block.cumsum() - per_block).repeat(widths)  # per row: its block's first pair
+    within_row = np.arange(len(beam)) - (puffs_of_row.cumsum() - puffs_of_row).repeat(puffs_of_row)
     puff_of_pair = first_of_instant.take(pair_instant) + pair_slot
-    return beam, puff_of_pair.take((per_block.cumsum() - per_block).repeat(sizes) + within % count_in_block)
+    return beam, puff_of_pair.take(first_pair.repeat(puffs_of_row) + within_row)
