@@ -41,6 +41,7 @@ def test_bench_json_reports_every_bundled_sensor_and_every_section():
         # a steady stream as the daemon computes it, beside the one-scan-alone figure
         assert 0 < row["streamed_ms"] <= row["max_streamed_ms"] < math.inf
         assert math.isclose(row["fraction"], row["streamed_ms"] / row["period_ms"])
+        assert math.isclose(row["max_fraction"], row["max_streamed_ms"] / row["period_ms"]) and 1.0 <= row["slowest_at_s"] <= 60.0
 
     assert {(row["scene"], row["sensor"]) for row in report["rays"]} == {(s, n) for s, n, _ in expected}
     for row in report["rays"]:
@@ -75,16 +76,18 @@ def test_bench_scans_table_has_a_row_per_sensor_and_preset_with_both_figures():
     result = bench("--section", "scans")
     assert result.returncode == 0, result.stderr
     lines = result.stdout.splitlines()
-    assert "stream ms" in lines[1] and "alone ms" in lines[1] and "fraction" in lines[1]
+    assert "best of 3 wall-clock timings" in lines[0]  # how each figure was taken
+    assert "stream ms" in lines[1] and "alone ms" in lines[1] and "at s" in lines[1] and "max frac" in lines[1]
     rows = [line.split() for line in lines[2:] if line.strip()]
     sensors = sum(len(load_scene(bundled.name).sensors) for bundled in bundled_scenes())
     dense = len(load_scene("railway").sensors)  # railway-10k: railway with 10 000 live particles
     assert len(rows) == 2 * (sensors + dense)  # formsma2011 and physical
     assert [row[0] for row in rows[-2 * dense :]] == ["railway-10k"] * 2 * dense
     for row in rows:
-        streamed, alone, period = float(row[4]), float(row[6]), float(row[8])
-        assert streamed > 0 and alone > 0
-        assert abs(float(row[-1].rstrip("%")) - 100 * streamed / period) < 0.1  # the fraction is the streamed cost
+        streamed, slowest, slowest_at, alone, period = float(row[4]), float(row[5]), float(row[6]), float(row[7]), float(row[9])
+        assert 0 < streamed <= slowest and alone > 0 and 1.0 <= slowest_at <= 60.0
+        assert abs(float(row[-2].rstrip("%")) - 100 * streamed / period) < 0.1  # the fraction is the streamed cost
+        assert abs(float(row[-1].rstrip("%")) - 100 * slowest / period) < 0.1  # and at the slowest instant
 
 
 def test_unknown_section_is_a_usage_error():
