@@ -13,6 +13,7 @@ beams numbered as stacked rows (instant k's beam b is row k·N + b).
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Sequence
 
 import numpy as np
@@ -33,10 +34,14 @@ def cross_instants(
     parts: Sequence[Puffs], origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray
 ) -> BeamPuffCrossings:
     """Instant k's puffs `parts[k]` against its beams, rows k·N .. (k + 1)·N of `origins`, unit
-    `directions` (K·N, 3) and `beam_end_m` (K·N,): `cross_beams` of each instant, concatenated, each
-    pair's beam its stacked row. Instants for which `cross_beams` takes another path (their beams share
-    one origin: perhaps a fan, as when the body stands still; too few beams for blocks; a segment
-    without an end) are crossed by it, one at a time; all the others together."""
+    `directions` (K·N, 3) and `beam_end_m` (K·N,): each pair's beam its stacked row, each row's pairs
+    those `cross_beams` gives that instant, in its order (rows may interleave: what follows sums per row).
+
+    Instants for which `cross_beams` takes another path (their beams share one origin: perhaps a fan,
+    as when the body stands still; too few beams for blocks; a segment without an end) are crossed by
+    it, those with the very same beams in one call (their puffs' pairs offset to their rows, as a fixed
+    sensor's instants are); all the others together here.
+    """
     count = len(parts)
     n = len(origins) // count if count else 0
     if n == 0:
@@ -48,7 +53,7 @@ def cross_instants(
     together = several_origins & np.isfinite(ends.reshape(count, n * 3)).all(axis=1) & (n > BEAMS_PER_BLOCK)
     if together.all():
         return _cross_together(parts, origins, directions, beam_end_m, ends, n)
-    pieces: list[tuple[np.ndarray, ...]] = []
+    pieces: list[BeamPuffCrossings] = []
     if together.any():
         batched = _cross_together(  # renumbered as if these instants were stacked alone
             [part for part, joins in zip(parts, together) if joins],
@@ -57,20 +62,32 @@ def cross_instants(
             ends.reshape(count, n, 3)[together].reshape(-1, 3),
             n,
         )
-        bounds = batched.beam.searchsorted(np.arange(together.sum() + 1) * n)  # its pairs are instant-major
-    rank = together.cumsum() - 1  # an instant's place among those crossed together
-    for k in range(count):  # per instant, not per beam: K pieces in instant order
-        if together[k]:
-            piece = slice(bounds[rank[k]], bounds[rank[k] + 1])
-            pieces.append((batched.beam[piece] + (k - rank[k]) * n, *(getattr(batched, name)[piece] for name in _FIELDS)))
+        joined = together.nonzero()[0]
+        per_instant = np.diff(batched.beam.searchsorted(np.arange(len(joined) + 1) * n))  # its pairs are instant-major
+        pieces.append(dataclasses.replace(batched, beam=batched.beam + ((joined - np.arange(len(joined))) * n).repeat(per_instant)))
+    for group in _same_beams(origins, directions, beam_end_m, n, (~together).nonzero()[0]):  # per instant, not per beam
+        rows = slice(group[0] * n, (group[0] + 1) * n)
+        offsets = np.array(group).repeat([len(parts[k]) for k in group]) * n
+        pieces.append(cross_beams(Puffs.concatenate([parts[k] for k in group]), origins[rows], directions[rows], beam_end_m[rows], offsets))
+    return BeamPuffCrossings(*(np.concatenate([getattr(piece, name) for piece in pieces]) for name in _FIELDS))
+
+
+_FIELDS = ("beam", "along_m", "sigma", "column", "before_origin")
+
+
+def _same_beams(origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray, n: int, instants: np.ndarray) -> list[list[int]]:
+    """`instants` grouped by equal beams (origins, directions and ends alike, bit for bit)."""
+    groups: list[list[int]] = []
+    for k in instants:
+        rows = slice(k * n, (k + 1) * n)
+        for group in groups:
+            first = slice(group[0] * n, (group[0] + 1) * n)
+            if all(np.array_equal(a[rows], a[first]) for a in (origins, directions, beam_end_m)):
+                group.append(int(k))
+                break
         else:
-            rows = slice(k * n, (k + 1) * n)
-            alone = cross_beams(parts[k], origins[rows], directions[rows], beam_end_m[rows])
-            pieces.append((alone.beam + k * n, *(getattr(alone, name) for name in _FIELDS)))
-    return BeamPuffCrossings(*(np.concatenate(column) for column in zip(*pieces)))
-
-
-_FIELDS = ("along_m", "sigma", "column", "before_origin")
+            groups.append([int(k)])
+    return groups
 
 
 def _cross_together(
