@@ -498,12 +498,12 @@ def _material_arrays(beams: Beams, objects: np.ndarray, params: PhysicalParams) 
     if not params.material_effects or not beams.scene.objects:
         return np.ones(objects.shape), np.zeros(objects.shape), np.zeros(objects.shape)
     scene, table = _MATERIAL_TABLES.get(beams.world, (None, None))
-    if scene is not beams.scene or table is None:  # per object, plus a last row for "nothing hit"; kept (moving beams ask every scan)
+    if scene is not beams.scene or table is None:  # per object, plus a last column for "nothing hit"; kept (moving beams ask every scan)
         materials = [optics_for(obj.material) for obj in beams.scene.objects]
-        table = np.array([[m.angle_exponent, m.range_stretch, m.patchiness] for m in materials] + [[1.0, 0.0, 0.0]])
+        table = np.array([[m.angle_exponent, m.range_stretch, m.patchiness] for m in materials] + [[1.0, 0.0, 0.0]]).T.copy()
         _MATERIAL_TABLES[beams.world] = (beams.scene, table)
-    picked = table[np.where(objects >= 0, objects, len(table) - 1)]
-    return picked[..., 0], picked[..., 1], picked[..., 2]
+    index = np.where(objects >= 0, objects, table.shape[1] - 1)
+    return table[0].take(index), table[1].take(index), table[2].take(index)  # a gather per column: cheaper than rows
 
 
 def bin_fractions(params: PhysicalParams) -> np.ndarray:
