@@ -240,20 +240,34 @@ def _region_extents(hits: BeamHits) -> tuple[tuple[np.ndarray, np.ndarray], ...]
 
 
 def _region_path_to(instants: Instants, rows: np.ndarray, limits: np.ndarray) -> np.ndarray:
-    """Region optical path from the origin to `limits` (len(rows), S) for stacked rows `rows`."""
+    """Region optical path from the origin to `limits` (len(rows), S), ascending along each row, for
+    stacked rows `rows`. Rows that enter a region only past their last limit gain exactly 0 from it:
+    where they are most, only the others are summed."""
     total = np.zeros(limits.shape)
     beams = instants.beam_rows(rows)
     for region, density in instants.smoky_regions():
         entry, exit_ = region.entry_m.take(beams, axis=0), region.exit_m.take(beams, axis=0)  # take: cheaper than 2-D indexing
-        if entry.shape[1] == 1:  # one interval per beam (a convex region): no sum over intervals
-            inside = np.minimum(exit_, limits)
-            inside -= np.minimum(entry, limits)
+        reached = (entry.min(axis=1) if entry.shape[1] > 1 else entry[:, 0]) < limits[:, -1]
+        if not reached.any():
+            continue
+        if reached.mean() > 0.5:
+            total += _chords_to(entry, exit_, limits, density.take(rows))
         else:
-            limit = limits[:, :, None]
-            inside = (np.minimum(exit_[:, None, :], limit) - np.minimum(entry[:, None, :], limit)).sum(axis=2)
-        inside *= density.take(rows)[:, None]
-        total += inside
+            some = reached.nonzero()[0]
+            total[some] += _chords_to(entry.take(some, axis=0), exit_.take(some, axis=0), limits.take(some, axis=0), density.take(rows.take(some)))
     return total
+
+
+def _chords_to(entry: np.ndarray, exit_: np.ndarray, limits: np.ndarray, density: np.ndarray) -> np.ndarray:
+    """Optical path (R, S) inside intervals [entry, exit) (R, K) before each of `limits` (R, S), at `density` (R,)."""
+    if entry.shape[1] == 1:  # one interval per beam (a convex region): no sum over intervals
+        inside = np.minimum(exit_, limits)
+        inside -= np.minimum(entry, limits)
+    else:
+        limit = limits[:, :, None]
+        inside = (np.minimum(exit_[:, None, :], limit) - np.minimum(entry[:, None, :], limit)).sum(axis=2)
+    inside *= density[:, None]
+    return inside
 
 
 def _depth_edges(hits: BeamHits, params: PhysicalParams, block: int | None = None) -> np.ndarray:
