@@ -68,9 +68,11 @@ class SensorMount:
         return np.array(frames.positions[0]), np.array(frames.rotations[0])
 
     def moving_rays(self, angles_rad: np.ndarray, beam_times_s: np.ndarray) -> MovingRays:
-        """Each beam (sensor-frame angle (N,)) cast from the sensor's pose at its instant (N,)."""
+        """Each beam (sensor-frame angle (N,)) cast from the sensor's pose at its instant: `beam_times_s`
+        (K·N,) holds K scans of these beams, one after another."""
         frames = self.frames(beam_times_s)
         local = np.stack([np.cos(angles_rad), np.sin(angles_rad), np.zeros_like(angles_rad)], axis=1)
+        local = np.tile(local, (len(frames.positions) // max(len(angles_rad), 1), 1))  # a scan's directions, once
         directions = np.einsum("nij,nj->ni", frames.rotations, local)
         return MovingRays(np.ascontiguousarray(frames.positions), directions, frames.rotations)
 
@@ -82,7 +84,7 @@ def cast_moving(
     """Each scan at `times_s` of a sensor on a moving body: beam i of a scan at t measured at t + offsets_s[i]."""
     n = len(angles_rad)
     beam_times = (np.asarray(times_s, dtype=float)[:, None] + offsets_s).ravel()
-    rays = mount.moving_rays(np.tile(angles_rad, len(times_s)), beam_times)
+    rays = mount.moving_rays(angles_rad, beam_times)
     prepared = world.with_moving_solids(world.prepare(rays.origins, rays.directions, max_range_m), beam_times)
     casts = []
     for index, time_s in enumerate(times_s):
