@@ -20,6 +20,7 @@ hang.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import multiprocessing
 import multiprocessing.connection
@@ -30,7 +31,7 @@ import types
 from concurrent.futures import Executor, Future
 from dataclasses import dataclass, field
 from multiprocessing.reduction import ForkingPickler
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 from emulator.scene.live import event_from_record
 from emulator.scene.model import Scene
@@ -38,11 +39,12 @@ from emulator.sensors.scan import Scan
 
 WORKER_START_TIMEOUT_S = 120.0  # building a world from a large mesh scene can take a while
 MAX_ATTEMPTS = 2  # a job is sent to at most this many worker lives
-# Workers compute scans a batch (0.2–0.8 s) ahead, while a late byte on the wire is a protocol
-# fault: at nice 19 a busy worker gives way at once to the daemon's loop and to its clients
-# (measured: one scan in eight 3–5 ms late at nice 0, none over 0.5 ms at 19), and still has
-# every idle cycle. On a machine whose cores other work keeps busy, a lower value keeps scans coming.
-WORKER_NICE = 19
+# A worker's CPU priority (`serve --worker-nice`). Workers compute a batch (0.2–0.8 s) ahead while a
+# late byte on the wire is a protocol fault, so on a machine with idle cores a higher value (19) lets
+# a busy worker give way at once to the daemon's loop and its clients; but against other busy
+# processes a nice-19 worker gets ~1.5 % of a core and scans stall (an LMS200 ACK then waited for
+# its telegram's scan for up to 1.5 s), so the default is the daemon's own priority.
+WORKER_NICE = 0
 
 
 class ScanJobFailed(RuntimeError):
@@ -122,6 +124,27 @@ def _worker_main(
             connection.send(("failed", job, f"{type(error).__name__}: {error}"))
         else:
             connection.send(("done", job, result))
+
+
+# numpy's BLAS starts a thread per core and keeps it spinning after each call: a worker (already one
+# per core) then holds two cores during a batch, and the daemon's loop waits for one to send a scan.
+SINGLE_THREAD_MATH = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+
+
+@contextlib.contextmanager
+def _one_math_thread() -> Iterator[None]:
+    """The environment a worker is spawned with (read by numpy's BLAS when the worker imports it);
+    the daemon's own environment is restored at once."""
+    saved = {name: os.environ.get(name) for name in SINGLE_THREAD_MATH}
+    os.environ.update(SINGLE_THREAD_MATH)
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
 
 class WorkerFailed(ScanJobFailed):
@@ -248,7 +271,8 @@ class WorkerPool:
             name=f"lrf-scan-worker-{worker.index}",
             daemon=True,
         )
-        process.start()
+        with _one_math_thread():
+            process.start()
         child.close()
         worker.process, worker.connection = process, parent
         worker.lives += 1
