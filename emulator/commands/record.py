@@ -40,7 +40,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     scene = scene_from_args(args)
     sensor = create_sensor(scene, args.sensor, world_from_args(scene, args))
-    times = scan_times(sensor.configured_period_s, args.start, args.end)
+    times = scan_times(sensor.configured_period_s, args.start, args.end, sensor.configured_phase_s)
     scans = progress(scan_series(sensor, times), len(times), f"record {sensor.name}")
     first = next(scans, None)
     if first is None:

@@ -44,7 +44,7 @@ from emulator.optics import World
 from emulator.scene.live import ClockChange, LiveEvent, LiveState, event_record
 from emulator.scene.endpoints import Address, PtyAddress, Rfc2217Address, plan_endpoints
 from emulator.scene.model import Scene, SensorSpec
-from emulator.sensors import create_sensor
+from emulator.sensors import create_sensor, urg04lx
 from emulator.sensors.scan import Scan
 from emulator.transport.pty import PtyEndpoint
 from emulator.transport.rfc2217 import Rfc2217Endpoint
@@ -64,7 +64,7 @@ DEVICE_OPTIONS: dict[str, tuple[str, ...]] = {
 MAX_HELD_INPUT_BYTES = 65536  # client input waiting for a scan; beyond, it is discarded (counted)
 RETRY_AFTER_FAILURE_S = 0.1  # a device whose scan failed is polled again this much later (wall)
 
-DeviceFactory = Callable[[SensorSpec, Callable[..., Scan]], Device]
+DeviceFactory = Callable[..., Device]  # (spec, scans, *, phase_ms) → the endpoint's device
 
 
 class Clock(Protocol):
@@ -85,14 +85,15 @@ def simulated_sensors(scene: Scene, world: World | None = None) -> SensorFactory
     return lambda spec: create_sensor(scene, spec.name, world=world)
 
 
-def build_device(spec: SensorSpec, scans: Callable[..., Scan]) -> Device:
+def build_device(spec: SensorSpec, scans: Callable[..., Scan], *, phase_ms: int = 0) -> Device:
     """The protocol device for the sensor's model, configured from its scene options.
-    It powers on at simulated time 0: a URG stamp is the scan's simulated time in ms."""
+    It powers on at simulated time 0: a URG stamp is the scan's simulated time in ms;
+    a URG's revolutions complete `phase_ms` past each 100 ms."""
     if spec.model not in DEVICE_OPTIONS:
         raise UserError(f"sensor {spec.name!r}: no protocol for model {spec.model!r}")
     options = {key: spec.options[key] for key in DEVICE_OPTIONS[spec.model] if key in spec.options}
     if spec.model == "urg-04lx":
-        return UrgDevice(scans, **options)
+        return UrgDevice(scans, **options, phase_ms=phase_ms)
     return Lms200Device(scans, **options)
 
 
@@ -347,7 +348,7 @@ class Daemon:
         for ordinal, (spec, addresses) in enumerate(self._plan):
             scans = self.scan_caches[spec.name] = ScanCache(factory(spec), executor, phase=ordinal, observer=self._on_scan)
             for position, address in enumerate(addresses):
-                device = self._device_factory(spec, scans)
+                device = self._device_factory(spec, scans, phase_ms=self._phase_ms(spec))
                 session = DeviceSession(
                     device, self.clock, loop, scans.prefetch, self._timer.call_later, pending=scans.pending
                 )
@@ -382,6 +383,13 @@ class Daemon:
             self._before_workers.clear()  # the pool keeps them from now on (a restarted worker replays them)
         pool = self.pool
         return (lambda spec: pool.sensor(spec.name)), pool.executor()
+
+    def _phase_ms(self, spec: SensorSpec) -> int:
+        """A simulated URG's revolution phase in its scene (a supplied scan source keeps phase 0: a replay's
+        scans lie where they were recorded)."""
+        if self._sensor_factory is not None or spec.model != urg04lx.MODEL:
+            return 0
+        return urg04lx.revolution_phase_ms(self.scene, spec.name)
 
     def _origin(self, spec: SensorSpec, position: int) -> str:
         """Where an endpoint was asked for: `--endpoint urg` or `x.toml: sensors[0].endpoints[1]`."""

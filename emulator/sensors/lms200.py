@@ -197,6 +197,8 @@ class LmsSensor:
         """The scan the scene's options select (`configured_window`), at `time_s`."""
         return self.scan(time_s, **configured_window(self.spec.options))
 
+    configured_phase_s = 0.0  # scans complete at k · period
+
     @property
     def configured_period_s(self) -> float:
         """Time the mirror needs for that scan: 1, 2 or 4 revolutions at 1°, 0.5°, 0.25°."""

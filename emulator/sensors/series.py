@@ -12,13 +12,15 @@ from emulator.sensors import Sensor
 from emulator.sensors.scan import Scan
 
 
-def scan_times(period_s: float, start_s: float, end_s: float) -> np.ndarray:
-    """The scan completion times k · period_s within [start_s, end_s]."""
+def scan_times(period_s: float, start_s: float, end_s: float, phase_s: float = 0.0) -> np.ndarray:
+    """The scan completion times phase_s + k · period_s within [start_s, end_s] (k ≥ 0),
+    on the µs grid the device's times lie on."""
     if not (math.isfinite(start_s) and math.isfinite(end_s)) or start_s < 0 or end_s < start_s:
         raise UserError(f"need 0 <= --start <= --end, got {start_s} and {end_s}")
-    first = math.ceil(start_s / period_s - 1e-9)
-    last = math.floor(end_s / period_s + 1e-9)
-    return np.arange(first, last + 1) * period_s
+    first = max(0, math.ceil((start_s - phase_s) / period_s - 1e-9))
+    last = math.floor((end_s - phase_s) / period_s + 1e-9)
+    times = np.arange(first, last + 1) * period_s
+    return times if phase_s == 0 else np.round((times + phase_s) * 1e6) / 1e6
 
 
 def scan_series(sensor: Sensor, times_s: np.ndarray) -> Iterator[Scan]:

@@ -60,6 +60,15 @@ def step_angles_rad() -> np.ndarray:
     return angles
 
 
+def revolution_phase_ms(scene: Scene, name: str) -> int:
+    """When sensor `name`'s revolutions complete, past each 100 ms: the i-th of a scene's n URG-04LX
+    turns i × 100 ms / n (whole ms) behind the first. Real units are not powered on in step; a daemon
+    serving many then sends their scans spread over the period instead of all at once, and daemons of a
+    fleet, given the same scene, agree on every sensor's instants."""
+    urgs = [spec.name for spec in scene.sensors if spec.model == MODEL]
+    return urgs.index(name) * int(PERIOD_S * 1000) // len(urgs)
+
+
 class UrgSensor:
     """A simulated URG-04LX: `scan(time_s)` gives the 769 values of steps 0..768."""
 
@@ -80,6 +89,7 @@ class UrgSensor:
             self._origins, self._directions = self.mount.fixed_rays(self._valid_angles)
             self._prepared = world.prepare(self._origins, self._directions, MAX_RANGE_M)  # fixed geometry never moves
         self._response = response_model(scene.model)
+        self.configured_phase_s = revolution_phase_ms(scene, spec.name) / 1000
 
     def scan(self, time_s: float) -> Scan:
         """The scan completed at simulated time `time_s` (the world evaluated at that instant)."""
@@ -114,7 +124,7 @@ class UrgSensor:
         """The same as `scan`: the URG-04LX has one scan (its window is chosen by the protocol)."""
         return self.scan(time_s)
 
-    configured_period_s = PERIOD_S
+    configured_period_s = PERIOD_S  # scans complete at configured_phase_s + k · period
 
 
 def ranges_m(values: np.ndarray) -> np.ndarray:

@@ -110,9 +110,12 @@ class _ScanReply:
 class UrgDevice:
     """One endpoint's virtual URG-04LX, across the clients that connect to it.
 
-    `scan_source(t)` returns the scan completed at grid time t = k / 10 s.
+    `scan_source(t)` returns the scan completed at grid time t = phase + k / 10 s.
     `now` is simulated seconds; the device timer reads
     (now - epoch) in ms mod 2^24, the epoch being `start_time` until RS.
+    `phase_ms` (0..99) shifts the mirror's revolutions: units that were not
+    powered on together do not turn in step, and a daemon serving many of them
+    then sends their scans spread over the period instead of all at once.
 
     `timing="real"` (default) answers as the real unit does: commands are handled
     at the cycle point of each 100 ms revolution (k / 10 s), so a reply is due
@@ -131,12 +134,17 @@ class UrgDevice:
         boot_protocol: str = "scip2",
         start_time: float = 0.0,
         timing: str = "real",
+        phase_ms: int = 0,
     ) -> None:
         if boot_protocol not in BOOT_PROTOCOLS:
             raise ValueError(f"boot_protocol must be one of {BOOT_PROTOCOLS}, got {boot_protocol!r}")
         if timing not in TIMINGS:
             raise ValueError(f"timing must be one of {TIMINGS}, got {timing!r}")
+        if not 0 <= phase_ms < 1000 // SCANS_PER_SECOND:
+            raise ValueError(f"phase_ms must be 0..{1000 // SCANS_PER_SECOND - 1}, got {phase_ms}")
         self._scan_source = scan_source
+        self._phase_ms = phase_ms
+        self._phase_s = phase_ms / 1000
         self._serial = serial
         self._boot_protocol = boot_protocol
         self._fast = timing == "fast"
@@ -157,7 +165,7 @@ class UrgDevice:
 
     def receive(self, data: bytes, now: float) -> list[Output]:
         """Queue each complete line for its command cycle; whatever is due by `now`."""
-        due = now if self._fast else _next_cycle_point(now)
+        due = now if self._fast else _next_cycle_point(now - self._phase_s) + self._phase_s
         for line in self._lines.feed(data):
             if len(self._queue) < MAX_QUEUED_COMMANDS:
                 self._queue.append(_Command(due, line, now))
@@ -189,7 +197,7 @@ class UrgDevice:
     def next_deadline(self) -> float | None:
         deadlines = [self._queue[0].due] if self._queue else []
         if self._stream is not None:
-            deadlines.append(self._stream.next_index / SCANS_PER_SECOND)
+            deadlines.append(self._scan_time(self._stream.next_index))
         return min(deadlines, default=None)
 
 
@@ -197,7 +205,7 @@ class UrgDevice:
         """With fast timing, the scan a GD/GS received at `now` reads at once: a daemon
         computes it before handing the bytes over, so that answering never waits on a
         computation (with real timing a GD waits for a later scan, a deadline of its own)."""
-        return _latest_scan_index(now) / SCANS_PER_SECOND if self._fast else None
+        return self._scan_time(_latest_scan_index(now - self._phase_s)) if self._fast else None
 
     def connection_lost(self) -> None:
         """Streaming stops and unanswered commands are forgotten; the unit keeps
@@ -235,7 +243,7 @@ class UrgDevice:
         stream = self._stream
         if stream is None:
             return []
-        latest = _latest_scan_index(now) - (before and _on_grid(now))
+        latest = _latest_scan_index(now - self._phase_s) - (before and _on_grid(now - self._phase_s))
         if stream.next_index > latest:
             return []
         period = stream.request.interval + 1
@@ -375,10 +383,11 @@ class UrgDevice:
         if not self._laser_on:
             return _reply(echo, b"10")
         if self._fast:
-            index = _latest_scan_index(now)
+            index = _latest_scan_index(now - self._phase_s)
         else:
-            index = math.ceil((received - MEASUREMENT_START_S) * SCANS_PER_SECOND - _EPSILON_S) + 1
-        first_after_reset = self._epoch_ms // (1000 // SCANS_PER_SECOND) + 1
+            measured_from = received - self._phase_s - MEASUREMENT_START_S
+            index = math.ceil(measured_from * SCANS_PER_SECOND - _EPSILON_S) + 1
+        first_after_reset = (self._epoch_ms - self._phase_ms) // (1000 // SCANS_PER_SECOND) + 1
         index = max(index, self._last_polled_scan + 1, first_after_reset)
         self._last_polled_scan = index
         width = VALUE_CHARS[code]
@@ -386,7 +395,7 @@ class UrgDevice:
         def build() -> bytes:
             return _reply(echo, b"00", self._scan_body(self._scan_at(index), request, width))
 
-        due = index / SCANS_PER_SECOND
+        due = self._scan_time(index)
         return build() if due <= now + _EPSILON_S else _ScanReply(due, build)
 
     def _start_stream(self, code: bytes, params: bytes, echo: bytes, tag_suffix: bytes, now: float) -> bytes:
@@ -399,7 +408,7 @@ class UrgDevice:
             request=request,
             echo_prefix=code + params[:-2],
             tag_suffix=tag_suffix,
-            next_index=_first_scan_after(now),
+            next_index=_first_scan_after(now - self._phase_s),
             remaining=request.count or None,
         )
         return _reply(echo, b"00")
@@ -425,8 +434,12 @@ class UrgDevice:
             if stream.remaining <= 0:
                 self._stream, self._laser_on = None, False
 
+    def _scan_time(self, index: int) -> float:
+        """When revolution `index` completes (simulated s): a whole millisecond, so its stamp is exact."""
+        return (index * (1000 // SCANS_PER_SECOND) + self._phase_ms) / 1000
+
     def _scan_at(self, index: int) -> DeviceScan:
-        return self._scan_source(index / SCANS_PER_SECOND)
+        return self._scan_source(self._scan_time(index))
 
     def _scan_body(self, scan: DeviceScan, request: ScanRequest, width: int) -> bytes:
         values = cluster_minimum(np.asarray(scan.values)[request.start : request.end + 1], request.cluster)
@@ -441,7 +454,7 @@ class UrgDevice:
             self._protocol = "scip2"
             return scip1.SWITCH_REPLY
         return scip1.reply(
-            line.text, lambda: np.asarray(self._scan_at(_latest_scan_index(now)).values), self._serial
+            line.text, lambda: np.asarray(self._scan_at(_latest_scan_index(now - self._phase_s)).values), self._serial
         )
 
 

@@ -13,8 +13,9 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
-from support.interop import urg_step_values
+from support.interop import scan_values, urg_step_values
 
+from emulator.bench.serve_load import fleet_scene_text
 from emulator.bench.serve_process import ServeProcess
 from tests.emulator.test_serve import MD_FULL, decode_md_scan, run_serve
 
@@ -55,6 +56,30 @@ def test_two_daemons_with_one_epoch_serve_the_same_scan_of_an_instant_as_scan(tm
     stamp = shared[0]
     assert from_first[stamp] == from_second[stamp]
     np.testing.assert_array_equal(from_first[stamp], urg_step_values(Path("railway"), stamp / 1000))
+
+
+def test_the_urgs_of_a_scene_turn_out_of_step_and_a_fleet_agrees_on_each_ones_instants(tmp_path: Path) -> None:
+    """Three URGs in one scene complete their scans 0, 33 and 66 ms past each 100 ms, in every daemon
+    serving them; a scan is still the world at its own stamp (as `scan` computes it)."""
+    scene = tmp_path / "three-urgs.toml"
+    scene.write_text(fleet_scene_text(3))
+    epoch = time.time() - 20.0
+    common = ["--epoch", repr(epoch), "--workers", "1"]
+    names = ["urg00", "urg01", "urg02"]
+    endpoints = [f"{name}=tcp:127.0.0.1:0" for name in names]
+    with ServeProcess(scene, endpoints[:2], extra_args=["--sensors", "urg00,urg01", *common]) as first:
+        with ServeProcess(scene, endpoints[1:], extra_args=["--sensors", "urg01,urg02", *common]) as second:
+            wanted = [(first, "urg00"), (first, "urg01"), (second, "urg01"), (second, "urg02")]
+            with ThreadPoolExecutor(len(wanted)) as clients:
+                streams = [clients.submit(md_scans, daemon.endpoint(name).address, 4) for daemon, name in wanted]
+                scans = [dict(stream.result()) for stream in streams]
+    phases = [{stamp % 100 for stamp in stream} for stream in scans]
+    assert phases == [{0}, {33}, {33}, {66}], phases
+    shared = sorted(set(scans[1]) & set(scans[2]))
+    assert shared and scans[1][shared[0]] == scans[2][shared[0]]
+    stamp = max(scans[3])
+    _, expected = scan_values(scene, "urg02", stamp / 1000)
+    np.testing.assert_array_equal(scans[3][stamp], expected[44:726])
 
 
 def test_sensors_must_be_of_the_scene_and_the_epoch_not_in_the_future(tmp_path: Path) -> None:

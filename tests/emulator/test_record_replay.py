@@ -10,12 +10,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from emulator.bench.serve_load import fleet_scene_text
 from emulator.errors import UserError
 from emulator.recording.replay_sources import LmsReplay, UrgReplay, replay_sensor
 from emulator.recording.textlog import LogHeader, format_scan, read_log, write_log
 from emulator.scene import load_scene
 from emulator.sensors import create_sensor
 from emulator.sensors.scan import Scan
+from emulator.sensors.series import scan_times
+from emulator.sensors.urg04lx import revolution_phase_ms
 
 CLI = [sys.executable, "-m", "emulator.cli"]
 
@@ -95,6 +98,18 @@ def test_record_writes_the_sensors_scans_at_its_period(tmp_path: Path) -> None:
     for time_s, values in zip(expected_times, log.values):
         assert np.array_equal(values, sensor.scan(float(time_s)).values)
     assert len(set(log.values[:, 384].tolist())) == 2  # the onset (range → error 1) is inside this window
+
+
+def test_record_takes_a_scenes_later_urgs_at_their_revolution_phase(tmp_path: Path) -> None:
+    """The 2nd of 3 URGs turns 33 ms behind the 1st: `record` takes its scans where `serve` sends them."""
+    scene = tmp_path / "three.toml"
+    scene.write_text(fleet_scene_text(3))
+    assert [revolution_phase_ms(load_scene(scene), name) for name in ("urg00", "urg01", "urg02")] == [0, 33, 66]
+    out = tmp_path / "urg01.log"
+    result = run_cli("record", str(scene), "--sensor", "urg01", "--start", "1.0", "--end", "1.5", "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    assert np.round(read_log(out).times_s, 6).tolist() == [1.033, 1.133, 1.233, 1.333, 1.433]
+    assert scan_times(0.1, 0.0, 0.2, 0.066).tolist() == [0.066, 0.166]
 
 
 def test_record_lms_uses_the_scenes_window_and_two_revolutions_per_half_degree_scan(tmp_path: Path) -> None:

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from emulator.sensors.scan import Scan
 from protocols.scip import UrgDevice
@@ -137,3 +139,68 @@ def test_a_flood_of_commands_is_bounded(device):
         now = device.next_deadline()
         replies += len(device.poll(now))
     assert replies == 32 and now == pytest.approx(4.2)  # one fresh revolution each
+
+
+# --- a unit whose revolutions complete `phase_ms` past each 100 ms ------------------------------
+
+
+def test_a_phased_unit_answers_at_its_own_cycle_points():
+    device = UrgDevice(ramp_source, phase_ms=37)
+    assert device.receive(b"VV\n", 1.03) == []
+    assert device.next_deadline() == pytest.approx(1.037)
+    [vv] = device.poll(1.037)
+    assert vv.data.startswith(b"VV\n00P\n")
+    assert device.receive(b"VV\n", 1.04) == [] and device.next_deadline() == pytest.approx(1.137)
+
+
+def test_a_phased_unit_stamps_and_streams_its_own_revolutions():
+    asked: list[float] = []
+    device = UrgDevice(lambda t: asked.append(t) or ramp_source(t), phase_ms=37)
+    answer(device, b"BM", 0.95)
+    replied, reply = answer(device, b"GD0044072501", 1.05)  # the revolution 0.937-1.037... began before it
+    assert replied == pytest.approx(1.237) and stamp_of(reply) == 1237 and asked == [1.237]
+    replied, ack = answer(device, b"MD0044072501000", 1.3)
+    assert replied == pytest.approx(1.337)
+    assert device.next_deadline() == pytest.approx(1.437)
+    [scan] = device.poll(1.437)
+    assert stamp_of(scan.data) == 1437 and asked[-1] == 1.437
+
+
+def test_a_phase_outside_one_revolution_is_refused():
+    with pytest.raises(ValueError, match="phase_ms must be 0..99, got 100"):
+        UrgDevice(ramp_source, phase_ms=100)
+
+
+COMMANDS = [b"VV", b"BM", b"QT", b"TM0", b"TM1", b"TM2", b"GD0044072501", b"GS0100020002", b"MD0044072501003", b"MS0100020000"]
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    phase_ms=st.integers(1, 99),
+    script=st.lists(st.tuples(st.floats(0.0005, 0.35), st.sampled_from(COMMANDS)), min_size=1, max_size=12),
+    timing=st.sampled_from(["real", "fast"]),
+)
+def test_a_phased_unit_is_the_unphased_one_shifted_by_its_phase(phase_ms, script, timing):
+    """Everything a unit does happens `phase` later, byte for byte (after an RS both count from their reset)."""
+
+    def run(phase: int) -> list[tuple[float, bytes]]:
+        shift = phase / 1000
+        def source(t: float) -> Scan:  # the same values for the same revolution; the stamp is the unit's own
+            return Scan("urg", "URG-04LX", t, np.zeros(STEPS), ramp_source(round(t - shift, 6)).values)
+
+        device = UrgDevice(source, phase_ms=phase, timing=timing)
+        now, seen = 2.05 + shift, []
+
+        def drain(until: float) -> None:
+            while (deadline := device.next_deadline()) is not None and deadline <= until + 1e-9:
+                seen.extend((round(deadline - shift, 6), output.data) for output in device.poll(deadline))
+
+        seen.extend((round(now - shift, 6), output.data) for output in device.receive(b"RS\n", now))
+        for gap, line in script:
+            drain(now + gap)
+            now += gap
+            seen.extend((round(now - shift, 6), output.data) for output in device.receive(line + b"\n", now))
+        drain(now + 1.0)
+        return seen
+
+    assert run(phase_ms) == run(0)
