@@ -1,9 +1,10 @@
 """A real `serve` streaming N URG-04LX to N real clients: CPU per scan, rate, jitter.
 
 The scene is railway's world (its geometry, smoke and plume) with its sensors
-replaced by N URG-04LX side by side, each on `tcp:127.0.0.1:0`. One client per
-sensor connects over TCP and asks for an unlimited MD stream; a single
-selector thread in this process reads all N sockets and notes when each scan
+replaced by N URG-04LX side by side (and, for the moonshot row, M LMS200 at
+500 kBd), each on `tcp:127.0.0.1:0`. One client per sensor connects over TCP
+and asks for an unlimited MD stream (an LMS200: mode 24, every scan); a single
+selector thread in this process reads all sockets and notes when each scan
 message ends. Over the measuring window:
 
 - rate: scans received / scans due (10 per second per sensor);
@@ -12,6 +13,8 @@ message ends. Over the measuring window:
 - lateness: each scan's arrival against its slot (the scan's own timestamp,
   with the sensor's least-delayed scan defining the offset); "on time" is
   within ON_TIME_MS of the slot;
+- LMS200: telegrams received / due (37.5 per second at 0.5°) and the
+  telegram period deviation |Δt − 26.67 ms|, p50 and p99;
 - CPU per scan: user + system time of the daemon and its worker processes
   from /proc/PID/stat (the process's own accounting), divided by the scans
   received; "of it loop": the daemon's own process (protocols, transports,
@@ -35,17 +38,22 @@ import numpy as np
 
 from emulator.bench.serve_process import ServeProcess
 from emulator.scene import bundled_scenes
+from protocols.lms2xx import build_telegram
 from protocols.scip.encoding import decode_values
 
 MD_UNLIMITED = b"MD0044072501000\n"
 SCAN_PERIOD_S = 0.1
+LMS_BAUD = 500_000
+LMS_EVERY_SCAN = build_telegram(0x00, b"\x20\x24")  # continuous output of every scan
+LMS_PERIOD_S = 2 / 75  # 0.5°: two mirror revolutions per scan; 732 bytes take 14.6 ms at 500 kBd
 ON_TIME_MS = 10.0
 WARM_UP_S = 3.0
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 
 
-def fleet_scene_text(count: int) -> str:
-    """railway's world with `count` URG-04LX (urg00, urg01, ...) side by side, each on a free TCP port."""
+def fleet_scene_text(count: int, lms_count: int = 0) -> str:
+    """railway's world with `count` URG-04LX (urg00, urg01, ...) side by side, and `lms_count` LMS200
+    (lms00, ...) at 500 kBd, each on a free TCP port."""
     railway = next(bundled for bundled in bundled_scenes() if bundled.name == "railway")
     text = Path(railway.path).read_text()
     world = text[: text.index("[[sensors]]")]
@@ -53,10 +61,24 @@ def fleet_scene_text(count: int) -> str:
     for index in range(count):
         y = -0.6 + 1.2 * index / max(1, count - 1)
         sensors.append(
-            f'[[sensors]]\nname = "urg{index:02d}"\nmodel = "urg-04lx"\n'
+            f'[[sensors]]\nname = "{urg_name(index)}"\nmodel = "urg-04lx"\n'
             f'position = [0.25, {y:.4f}, 0.3]\nendpoints = ["tcp:127.0.0.1:0"]\n'
         )
+    for index in range(lms_count):
+        y = -0.6 + 1.2 * index / max(1, lms_count - 1)
+        sensors.append(
+            f'[[sensors]]\nname = "{lms_name(index)}"\nmodel = "lms200"\nbaud = {LMS_BAUD}\n'
+            f'position = [0.0, {y:.4f}, 0.4]\nendpoints = ["tcp:127.0.0.1:0"]\n'
+        )
     return world + "\n".join(sensors)
+
+
+def urg_name(index: int) -> str:
+    return f"urg{index:02d}"
+
+
+def lms_name(index: int) -> str:
+    return f"lms{index:02d}"
 
 
 def cpu_seconds(pid: int, children: bool = True) -> float:
@@ -101,30 +123,76 @@ class _Stream:
             self.arrivals.append(now)
             self.stamps.append(int(decode_values(message.split(b"\n")[2][:4], 4)[0]))
 
+    def forget(self) -> None:
+        self.arrivals.clear()
+        self.stamps.clear()
 
-def measure_serve(count: int, duration_s: float, workers: int | None = None, model: str = "physical") -> dict:
-    """Start `serve` with `count` URGs under preset `model`, stream them all to `count` clients,
-    measure `duration_s`."""
+
+@dataclass
+class _LmsStream:
+    """One client's LMS200 stream (mode 24: every scan): when each B0 telegram's last byte arrived.
+    Framed by STX, address and length only (no CRC: the bench measures timing, the interop tests
+    check the bytes), so the client's own cost stays small beside the daemon's."""
+
+    sock: socket.socket
+    buffer: bytearray = field(default_factory=bytearray)
+    arrivals: list[float] = field(default_factory=list)
+
+    def feed(self, data: bytes, now: float) -> None:
+        self.buffer += data
+        while self.buffer:
+            if self.buffer[0] != 0x02:  # the ACK, or bytes before the first telegram
+                start = self.buffer.find(b"\x02\x80")
+                del self.buffer[: start if start >= 0 else len(self.buffer)]
+                continue
+            if len(self.buffer) < 5:
+                return
+            total = 4 + int.from_bytes(self.buffer[2:4], "little") + 2
+            if len(self.buffer) < total:
+                return
+            if self.buffer[4] == 0xB0:
+                self.arrivals.append(now)
+            del self.buffer[:total]
+
+    def forget(self) -> None:
+        self.arrivals.clear()
+
+
+def measure_serve(
+    count: int, duration_s: float, workers: int | None = None, model: str = "physical", lms_count: int = 0
+) -> dict:
+    """Start `serve` with `count` URGs (and `lms_count` LMS200 at 500 kBd) under preset `model`,
+    stream them all to as many clients, measure `duration_s`."""
     with tempfile.TemporaryDirectory(prefix="lrf-bench-serve-") as folder:
-        scene = Path(folder) / f"urg-x{count}.toml"
-        scene.write_text(fleet_scene_text(count))
-        endpoints = [f"urg{index:02d}=tcp:127.0.0.1:0" for index in range(count)]
+        scene = Path(folder) / f"urg-x{count}-lms-x{lms_count}.toml"
+        scene.write_text(fleet_scene_text(count, lms_count))
+        names = [urg_name(index) for index in range(count)] + [lms_name(index) for index in range(lms_count)]
+        endpoints = [f"{name}=tcp:127.0.0.1:0" for name in names]
         extra = ["--model", model, *(["--workers", str(workers)] if workers is not None else [])]
-        with ServeProcess(scene, endpoints, extra_args=extra, timeout_s=120.0) as daemon:
-            streams = _stream_all(daemon, count, duration_s)
+        with ServeProcess(scene, endpoints, extra_args=extra, timeout_s=300.0) as daemon:
+            streams = _stream_all(daemon, count, lms_count, duration_s)
             load = os.getloadavg()
-    return {"model": model, **_figures(count, duration_s, workers, streams, load)}
+    return {"model": model, **_figures(count, lms_count, duration_s, workers, streams, load)}
 
 
-def _stream_all(daemon: ServeProcess, count: int, duration_s: float) -> tuple[list[_Stream], tuple[float, float]]:
+def _stream_all(
+    daemon: ServeProcess, count: int, lms_count: int, duration_s: float
+) -> tuple[list[_Stream], list[_LmsStream], tuple[float, float]]:
     selector = selectors.DefaultSelector()
-    streams = []
+    streams: list[_Stream] = []
+    lms_streams: list[_LmsStream] = []
     for index in range(count):
-        sock = socket.create_connection(daemon.endpoint(f"urg{index:02d}").address, timeout=5)
+        sock = socket.create_connection(daemon.endpoint(urg_name(index)).address, timeout=5)
         sock.sendall(MD_UNLIMITED)
-        sock.setblocking(False)
         streams.append(_Stream(sock))
-        selector.register(sock, selectors.EVENT_READ, streams[-1])
+    for index in range(lms_count):
+        sock = socket.create_connection(daemon.endpoint(lms_name(index)).address, timeout=5)
+        sock.sendall(LMS_EVERY_SCAN)
+        lms_streams.append(_LmsStream(sock))
+    everyone: list[_Stream | _LmsStream] = [*streams, *lms_streams]
+    for stream in everyone:
+        stream.sock.setblocking(False)
+        selector.register(stream.sock, selectors.EVENT_READ, stream)
     started = time.monotonic()
     measure_from, measure_to = started + WARM_UP_S, started + WARM_UP_S + duration_s
     cpu_before = loop_before = None
@@ -132,9 +200,8 @@ def _stream_all(daemon: ServeProcess, count: int, duration_s: float) -> tuple[li
         while (now := time.monotonic()) < measure_to:
             if cpu_before is None and now >= measure_from:
                 cpu_before, loop_before = cpu_seconds(daemon.pid), cpu_seconds(daemon.pid, children=False)
-                for stream in streams:  # the window starts here: forget the warm-up
-                    stream.arrivals.clear()
-                    stream.stamps.clear()
+                for stream in everyone:  # the window starts here: forget the warm-up
+                    stream.forget()
             for key, _ in selector.select(timeout=0.05):
                 data = key.fileobj.recv(65536)
                 if not data:
@@ -142,16 +209,20 @@ def _stream_all(daemon: ServeProcess, count: int, duration_s: float) -> tuple[li
                 key.data.feed(data, time.monotonic())
         cpu = cpu_seconds(daemon.pid) - (cpu_before or 0.0), cpu_seconds(daemon.pid, children=False) - (loop_before or 0.0)
     finally:
-        for stream in streams:
+        for stream in everyone:
             selector.unregister(stream.sock)
             stream.sock.close()
         selector.close()
-    return streams, cpu
+    return streams, lms_streams, cpu
 
 
-def _figures(count: int, duration_s: float, workers: int | None, measured: tuple[list[_Stream], float], load: tuple) -> dict:
-    streams, (cpu, daemon_cpu) = measured
+def _figures(
+    count: int, lms_count: int, duration_s: float, workers: int | None,
+    measured: tuple[list[_Stream], list[_LmsStream], tuple[float, float]], load: tuple,
+) -> dict:
+    streams, lms_streams, (cpu, daemon_cpu) = measured
     received = sum(len(stream.arrivals) for stream in streams)
+    lms_received = sum(len(stream.arrivals) for stream in lms_streams)
     due = count * duration_s / SCAN_PERIOD_S
     periods, lateness = [], []
     for stream in streams:
@@ -163,22 +234,36 @@ def _figures(count: int, duration_s: float, workers: int | None, measured: tuple
         lateness.append((offset - offset.min()) * 1000.0)
     jitter = np.abs(np.concatenate(periods) - SCAN_PERIOD_S) * 1000.0 if periods else np.array([np.nan])
     late = np.concatenate(lateness) if lateness else np.array([np.nan])
-    return {
+    scans = received + lms_received
+    row = {
         "sensors": count,
         "workers": workers if workers is not None else "default",
         "duration_s": duration_s,
         "scans_received": received,
-        "rate": received / due,
-        "on_time": float(np.mean(late <= ON_TIME_MS)) * min(1.0, received / due),
+        "rate": received / due if due else float("nan"),
+        "on_time": float(np.mean(late <= ON_TIME_MS)) * min(1.0, received / due) if due else float("nan"),
         "jitter_p50_ms": float(np.percentile(jitter, 50)),
         "jitter_p99_ms": float(np.percentile(jitter, 99)),
         "lateness_p99_ms": float(np.percentile(late, 99)),
         "lateness_max_ms": float(np.max(late)),
-        "cpu_ms_per_scan": cpu / received * 1000.0 if received else float("nan"),
-        "daemon_cpu_ms_per_scan": daemon_cpu / received * 1000.0 if received else float("nan"),
+        "cpu_ms_per_scan": cpu / scans * 1000.0 if scans else float("nan"),
+        "daemon_cpu_ms_per_scan": daemon_cpu / scans * 1000.0 if scans else float("nan"),
         "cpu_cores": cpu / duration_s,
         "load_average": [round(value, 2) for value in load],
     }
+    if lms_count:
+        deviations = [
+            np.abs(np.diff(stream.arrivals) - LMS_PERIOD_S) * 1000.0 for stream in lms_streams if len(stream.arrivals) > 1
+        ]
+        deviation = np.concatenate(deviations) if deviations else np.array([np.nan])
+        row |= {
+            "lms_sensors": lms_count,
+            "lms_scans_received": lms_received,
+            "lms_rate": lms_received / (lms_count * duration_s / LMS_PERIOD_S),
+            "lms_period_deviation_p50_ms": float(np.percentile(deviation, 50)),
+            "lms_period_deviation_p99_ms": float(np.percentile(deviation, 99)),
+        }
+    return row
 
 
 def table_lines(rows: list[dict]) -> list[str]:
@@ -196,11 +281,25 @@ def table_lines(rows: list[dict]) -> list[str]:
             f" {row['cpu_cores']:>6.2f}"
             f"  {' '.join(f'{value:g}' for value in row['load_average'])}"
         )
+        if row.get("lms_sensors"):
+            lines.append(
+                f"  {'':<11} + {row['lms_sensors']} LMS200 at {LMS_BAUD // 1000} kBd: rate {row['lms_rate']:.1%},"
+                f" telegram period deviation p50 {row['lms_period_deviation_p50_ms']:.2f} /"
+                f" p99 {row['lms_period_deviation_p99_ms']:.2f} ms (CPU per scan above counts both kinds)"
+            )
     return lines
 
 
+MOONSHOT = (100, 20, "formsma2011")  # URG-04LX, LMS200 at 500 kBd, preset: issue 16's moonshot
+
+
 def bench_section(quick: bool) -> tuple[dict, list[str]]:
-    """`lrf-emulator bench --section serve`: N = 1, 10, 40 under `physical` (quick: 5 s each, else 30 s)."""
+    """`lrf-emulator bench --section serve`: N = 1, 10, 40 URGs under `physical`, then the moonshot
+    (100 URGs + 20 LMS200 under `formsma2011`; not in a quick run: its start-up alone takes ~10 s).
+    Quick: 5 s each, else 30 s."""
     duration = 5.0 if quick else 30.0
     rows = [measure_serve(count, duration) for count in (1, 10, 40)]
+    if not quick:
+        urgs, lms, model = MOONSHOT
+        rows.append(measure_serve(urgs, duration, model=model, lms_count=lms))
     return {"serve": rows}, table_lines(rows)

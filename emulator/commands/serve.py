@@ -94,8 +94,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=int,
         default=WORKER_NICE,
         metavar="N",
-        help=f"the workers' CPU priority, 0..19 (default {WORKER_NICE}, the daemon's own; 19 on a machine with "
-        "idle cores lets them give way to the wire at once, but starves them against other busy processes)",
+        help=f"run the workers N nice levels below the daemon, 0..19 (default {WORKER_NICE}: the daemon's priority; 19 on "
+        "a machine with idle cores lets them give way to the wire at once, but starves them against other busy processes)",
     )
     parser.add_argument(
         "--view", metavar="HOST:PORT|off", default=None,

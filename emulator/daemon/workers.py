@@ -39,7 +39,7 @@ from emulator.sensors.scan import Scan
 
 WORKER_START_TIMEOUT_S = 120.0  # building a world from a large mesh scene can take a while
 MAX_ATTEMPTS = 2  # a job is sent to at most this many worker lives
-# A worker's CPU priority (`serve --worker-nice`). Workers compute a batch (0.2–0.8 s) ahead while a
+# How many nice levels a worker computes below the daemon (`serve --worker-nice`; os.nice adds, at most 19). Workers compute a batch (0.2–0.8 s) ahead while a
 # late byte on the wire is a protocol fault, so on a machine with idle cores a higher value (19) lets
 # a busy worker give way at once to the daemon's loop and its clients; but against other busy
 # processes a nice-19 worker gets ~1.5 % of a core and scans stall (an LMS200 ACK then waited for
@@ -88,7 +88,7 @@ def _worker_main(
     scene: Scene, sensor_names: Sequence[str], connection: multiprocessing.connection.Connection, nice: int
 ) -> None:
     """A worker's life: build the world once (at the daemon's priority, so start-up is not
-    starved), then answer jobs in order at `nice` until told to stop."""
+    starved), then answer jobs in order `nice` levels lower until told to stop."""
     from emulator.daemon.memory import keep_freed_memory
     from emulator.optics import World  # imported here: the parent need not build one
     from emulator.sensors import create_sensor
@@ -184,7 +184,7 @@ class WorkerPool:
         nice: int = WORKER_NICE,
     ) -> None:
         if not 0 <= nice <= 19:
-            raise ValueError(f"a worker's nice value must be 0..19, got {nice}")
+            raise ValueError(f"a worker's nice increment must be 0..19, got {nice}")
         self.scene = scene
         self.nice = nice
         self._context = multiprocessing.get_context("spawn")

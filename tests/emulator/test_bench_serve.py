@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import os
+import socket
 
-from emulator.bench.serve_load import cpu_seconds, fleet_scene_text, measure_serve
+from emulator.bench.serve_load import _LmsStream, cpu_seconds, fleet_scene_text, measure_serve
+from protocols.lms2xx import build_telegram
 from emulator.scene import load_scene
 
 
@@ -24,8 +26,22 @@ def test_cpu_is_read_from_the_process_accounting() -> None:
     assert cpu_seconds(os.getpid()) > before
 
 
-def test_two_urgs_streamed_to_two_clients_are_counted_and_timed() -> None:
-    row = measure_serve(2, 1.5, workers=1, model="formsma2011")
+def test_an_lms_stream_counts_each_b0_telegram_once_however_the_bytes_arrive() -> None:
+    scan = build_telegram(0x80, b"\xb0" + bytes(724) + b"\x10")  # 732 bytes, like a 0.5° scan
+    reply = build_telegram(0x80, b"\xa0\x00\x10")
+    wire = b"\x06" + reply + scan * 3
+    stream = _LmsStream(socket.socket())
+    for index, start in enumerate(range(0, len(wire), 97)):  # torn anywhere, STX/length included
+        stream.feed(wire[start : start + 97], float(index))
+    stream.sock.close()
+    assert len(stream.arrivals) == 3 and not stream.buffer
+    assert stream.arrivals == sorted(stream.arrivals)
+
+
+def test_two_urgs_and_an_lms200_streamed_to_their_clients_are_counted_and_timed() -> None:
+    row = measure_serve(2, 1.5, workers=1, model="formsma2011", lms_count=1)
+    assert 45 <= row["lms_scans_received"] <= 65  # 37.5/s × 1.5 s
+    assert 0 <= row["lms_period_deviation_p50_ms"] <= row["lms_period_deviation_p99_ms"]
     assert 25 <= row["scans_received"] <= 35  # 2 sensors × 10/s × 1.5 s
     assert 0.8 <= row["rate"] <= 1.2
     assert row["cpu_ms_per_scan"] > 0 and row["cpu_cores"] > 0

@@ -51,13 +51,13 @@ def _nice_of(pid: int) -> int:
 
 def test_workers_compute_at_the_nice_value_asked_with_one_math_thread(railway_pool) -> None:
     _, pool, _ = railway_pool
-    assert [_nice_of(pid) for pid in pool.pids] == [19, 19] and WORKER_NICE == 0
-    assert _nice_of(os.getpid()) == 0  # the daemon's own priority is untouched
+    ours = _nice_of(os.getpid())  # pytest may itself run under `nice`: os.nice adds
+    assert [_nice_of(pid) for pid in pool.pids] == [min(19, ours + 19)] * 2 and WORKER_NICE == 0
     for pid in pool.pids:  # one thread of numpy math per worker: BLAS threads would spin on a second core
         assert len(list(Path(f"/proc/{pid}/task").iterdir())) <= 2  # was 3 with a BLAS thread
         assert b"OPENBLAS_NUM_THREADS=1" in Path(f"/proc/{pid}/environ").read_bytes().split(b"\0")
     assert "OPENBLAS_NUM_THREADS" not in os.environ
-    with pytest.raises(ValueError, match="nice value must be 0..19, got 20"):
+    with pytest.raises(ValueError, match="nice increment must be 0..19, got 20"):
         WorkerPool(load_scene("railway"), [("urg",)], nice=20)
 
 
@@ -125,5 +125,4 @@ def test_a_restarted_worker_replays_the_world_events_applied_before_it_died() ->
 def test_serve_passes_worker_nice_to_its_workers() -> None:
     with ServeProcess("railway", ["urg=tcp:127.0.0.1:0"], extra_args=["--workers", "1", "--worker-nice", "7"]) as daemon:
         workers = [pid for pid in child_pids(daemon.pid) if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes()]
-        assert len(workers) == 1 and _nice_of(workers[0]) == 7
-        assert _nice_of(daemon.pid) == 0
+        assert len(workers) == 1 and _nice_of(workers[0]) == min(19, _nice_of(daemon.pid) + 7)
