@@ -21,6 +21,8 @@ through `World.apply` (`scene/live.py`): densities and plume emissions from
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import numpy as np
 import trimesh
 from embreex.mesh_construction import TriangleMesh
@@ -38,6 +40,9 @@ from emulator.scene.geometry import shape_mesh, world_mesh, world_to_local
 from emulator.scene.live import LiveState, WorldEvent
 from emulator.scene.model import MeshFile, Scene, SceneObject
 from emulator.scene.plumes import Particles, particles_at
+
+
+PARTICLE_INSTANTS_KEPT = 16  # two batches of scans (daemon/scan_cache.py SCAN_BATCH = 8)
 
 
 class World:
@@ -64,8 +69,7 @@ class World:
             i: shape_mesh(region.shape) for i, region in enumerate(scene.regions) if isinstance(region.shape, MeshFile)
         }
         self.live = LiveState(scene, self.bodies)
-        self._particles_key: tuple[int, float] | None = None
-        self._particles = Particles.empty()
+        self._particles: OrderedDict[tuple[int, float], Particles] = OrderedDict()
 
     def apply(self, event: WorldEvent) -> None:
         """A live change, in force from its instant on (scans at or after it must be recomputed).
@@ -89,19 +93,25 @@ class World:
         return float(self.scene.materials[material].reflectivity)
 
     def particles_at(self, time_s: float) -> Particles:
-        """All plumes' particles alive at `time_s` (the last instant's are kept: a scan asks twice)."""
+        """All plumes' particles alive at `time_s` (the last PARTICLE_INSTANTS_KEPT instants' are kept:
+        a scan asks twice, a batch of scans once to size its passes and once to cross them)."""
         key = (self.live.generation, time_s)  # a live change makes the kept particles stale
-        if key != self._particles_key:
-            particles = Particles.concatenate(
-                [
-                    particles_at(plume, self.scene.seed, i, time_s, self.live.plume_segments(i))
-                    for i, plume in enumerate(self.scene.plumes)
-                ]
-            )
-            for array in (particles.centers, particles.half_sizes, particles.density, particles.index):
-                array.flags.writeable = False  # shared by every caller at this instant
-            self._particles, self._particles_key = particles, key
-        return self._particles
+        kept = self._particles.get(key)
+        if kept is not None:
+            self._particles.move_to_end(key)
+            return kept
+        particles = Particles.concatenate(
+            [
+                particles_at(plume, self.scene.seed, i, time_s, self.live.plume_segments(i))
+                for i, plume in enumerate(self.scene.plumes)
+            ]
+        )
+        for array in (particles.centers, particles.half_sizes, particles.density, particles.index):
+            array.flags.writeable = False  # shared by every caller at this instant
+        self._particles[key] = particles
+        if len(self._particles) > PARTICLE_INSTANTS_KEPT:
+            self._particles.popitem(last=False)
+        return particles
 
     def first_triangles(self, origins: np.ndarray, directions: np.ndarray, max_range_m: float) -> np.ndarray:
         """Embree's first triangle index per ray within max_range_m (-1 for none): the plain INTERSECT."""

@@ -87,6 +87,26 @@ def test_scans_computed_together_equal_each_scan_computed_alone(sensor):
     assert len({scan.values.tobytes() for scan in together}) == len(times)  # the instants really differ
 
 
+@pytest.mark.parametrize("sensor", ["urg", "lms"])
+@pytest.mark.parametrize("puffs_per_pass", [1, 45])
+def test_a_batch_split_into_passes_by_its_puffs_equals_one_pass(sensor, puffs_per_pass, monkeypatch):
+    """A dense plume's batch is computed a few instants at a time (`PUFFS_PER_PASS`): the values must be
+    those of one pass over every instant, whichever instants each pass takes."""
+    import emulator.sensors.physical.preset as preset
+
+    scene = _smoke_that_comes_and_goes()
+    times = [0.9 + k * 0.08 for k in range(9)] + [2.5, 7.0]
+    one_pass = create_sensor(scene, sensor, World(scene)).scans(times)
+    monkeypatch.setattr(preset, "PUFFS_PER_PASS", puffs_per_pass)
+    world = World(scene)
+    split = create_sensor(scene, sensor, world).scans(times)
+    beams = [type("Instant", (), {"world": world, "time_s": t}) for t in times]
+    assert 3 <= len(preset._passes(beams)) < len(times) or puffs_per_pass == 1  # passes of several instants
+    for together, apart in zip(one_pass, split):
+        np.testing.assert_array_equal(apart.values, together.values)
+    assert len({scan.values.tobytes() for scan in split}) == len(times)
+
+
 def test_a_scan_is_evaluated_on_the_microsecond_grid():
     scene = _smoke_that_comes_and_goes()
     lms = create_sensor(scene, "lms", World(scene))
