@@ -109,6 +109,12 @@ class ScanCache:
                 self._observer(scan)
         return scan
 
+    def expect(self, request: dict[str, Any]) -> None:
+        """The request a device will make, told before its first one: that first scan is then
+        foreseen (`prefetch`, `pending`) like every later one, instead of making its caller wait."""
+        if self._last_request is None:
+            self._last_request = dict(request)
+
     def request(self, time_s: float, **request: Any) -> Future:
         """The scan for this request as a future (for readers that must not block, like the control API);
         a steady stream of them is foreseen and batched as a device's is."""

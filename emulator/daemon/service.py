@@ -141,6 +141,7 @@ class DeviceSession:
         prefetch: Callable[[float], None] | None = None,
         call_later: Callable[..., Cancellable] | None = None,
         pending: Callable[[float], Future | None] | None = None,
+        expect: Callable[[dict], None] | None = None,
     ) -> None:
         self.device = device
         self.endpoint: PtyEndpoint | TcpEndpoint | None = None
@@ -148,6 +149,7 @@ class DeviceSession:
         self._loop = loop
         self._prefetch = prefetch
         self._pending = pending
+        self._expect = expect
         self._call_later = call_later or loop.call_later
         self._timer: Cancellable | None = None
         self._prefetch_timer: Cancellable | None = None
@@ -179,6 +181,7 @@ class DeviceSession:
         time_s = latest_scan_time(self._clock.now())
         if time_s is None:
             return None
+        self._tell_request()
         self._prefetch(time_s)
         return self._pending(time_s)
 
@@ -252,10 +255,18 @@ class DeviceSession:
             self.endpoint.send(outputs)
         self._schedule()
 
+    def _tell_request(self) -> None:
+        """Tell the scan cache what the device will ask for, if it can say (`scan_request`), so even
+        its first scan is computed ahead and waited for without blocking the loop."""
+        scan_request = getattr(self.device, "scan_request", None)
+        if self._expect is not None and scan_request is not None:
+            self._expect(scan_request())
+
     def _schedule(self) -> None:
         self.stop()
         deadline = self.device.next_deadline()
         if deadline is not None:
+            self._tell_request()
             delay = self._clock.wall_delay(deadline - self._clock.now())
             if delay == float("inf"):
                 return  # the clock is paused: rescheduled when it resumes
@@ -350,7 +361,8 @@ class Daemon:
             for position, address in enumerate(addresses):
                 device = self._device_factory(spec, scans, phase_ms=self._phase_ms(spec))
                 session = DeviceSession(
-                    device, self.clock, loop, scans.prefetch, self._timer.call_later, pending=scans.pending
+                    device, self.clock, loop, scans.prefetch, self._timer.call_later, pending=scans.pending,
+                    expect=scans.expect,
                 )
                 try:
                     readies.append(self._open(spec, address, session, loop))

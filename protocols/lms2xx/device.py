@@ -233,6 +233,15 @@ class Lms200Device:
         revolutions = self._variant.revolutions
         return completion_time(latest_complete(now, revolutions), revolutions)
 
+    def scan_request(self) -> dict:
+        """What the scan source is asked for with a full scan of the current variant (besides its time):
+        a daemon can then compute a client's very first scan ahead, like every later one."""
+        variant = self._variant
+        return {
+            "start_deg": variant.start_deg, "step_deg": variant.step_deg, "count": variant.count,
+            "unit": self._config.units, "field_bits": self._measuring.field_bits,
+        }
+
     def next_scan_time(self) -> float | None:
         """Simulated time of the scan the next streamed telegram will carry (None when not
         streaming): the newest scan complete when the line frees, so a daemon can compute
@@ -366,14 +375,7 @@ class Lms200Device:
         key = (self._variant, self._config.units, field_bits, index)
         if key not in self._scan_cache:
             variant = self._variant
-            scan = self._scan_source(
-                completion_time(index, variant.revolutions),
-                start_deg=variant.start_deg,
-                step_deg=variant.step_deg,
-                count=variant.count,
-                unit=self._config.units,
-                field_bits=field_bits,
-            )
+            scan = self._scan_source(completion_time(index, variant.revolutions), **self.scan_request())
             self._scan_cache[key] = self._checked(scan, variant.count)
             self._prune_cache(index)
         return self._scan_cache[key]

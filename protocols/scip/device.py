@@ -201,6 +201,11 @@ class UrgDevice:
         return min(deadlines, default=None)
 
 
+    def scan_request(self) -> dict:
+        """What the scan source is asked for besides a scan's time: nothing (a URG measures every step;
+        requests choose among them), so a daemon can compute a client's very first scan ahead."""
+        return {}
+
     def latest_scan_time(self, now: float) -> float | None:
         """With fast timing, the scan a GD/GS received at `now` reads at once: a daemon
         computes it before handing the bytes over, so that answering never waits on a

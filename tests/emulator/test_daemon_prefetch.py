@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import heapq
 import itertools
+import socket
 import threading
 from concurrent.futures import Future
 from types import SimpleNamespace
@@ -12,10 +13,12 @@ from typing import Any, Callable
 
 import numpy as np
 
+from emulator.bench.serve_process import ServeProcess
 from emulator.daemon.clock import ManualClock
 from emulator.daemon.scan_cache import ScanCache
 from emulator.daemon.service import DeviceSession
 from emulator.sensors.scan import Scan
+from tests.emulator.test_serve_disconnect import stats
 from protocols.lms2xx import Lms200Device, build_telegram
 
 
@@ -140,3 +143,22 @@ def test_a_scan_nobody_foresaw_is_started_at_the_deadline_and_waited_for_without
         loop.close()
     assert [scan.time_s for scan in device.sent] == [1.0]
     assert cache.waits == 0  # the loop never waited on the computation
+
+
+def test_a_new_clients_first_scans_are_computed_ahead_and_the_loop_never_waits_for_one() -> None:
+    """A URG's and an LMS200's first streamed scans, against the real daemon and its workers:
+    the devices say what they will ask for (`scan_request`), so not one scan makes the loop wait
+    (`scan_waits`, counted each time a device's request finds its scan still being computed)."""
+    with ServeProcess("railway", ["urg=tcp:127.0.0.1:0", "lms=tcp:127.0.0.1:0"], extra_args=["--workers", "2"]) as daemon:
+        for _ in range(3):  # three clients in turn: each one's first scan is new to its sensor's cache
+            with socket.create_connection(daemon.endpoint("urg").address, timeout=5) as urg, \
+                    socket.create_connection(daemon.endpoint("lms").address, timeout=5) as lms:
+                urg.sendall(b"MD0044072501000\n")
+                lms.sendall(build_telegram(0x00, b"\x20\x24"))
+                received = b""
+                while received.count(b"\n\n") < 3:  # the echo and two scans
+                    received += urg.recv(65536)
+                lms_received = b""
+                while b"\x02\x80\xd6\x02\xb0" not in lms_received:  # a B0 scan telegram's head (9600 Bd)
+                    lms_received += lms.recv(65536)
+        assert stats(daemon)["scan_waits"] == 0
