@@ -19,7 +19,7 @@ import os
 import signal
 import sys
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 from emulator.commands.options import (
     LOOPBACK_HOSTS,
@@ -185,6 +185,7 @@ class Watching:
                  foxglove: tuple[str, int] | None, mcap: Path | None) -> None:
         self.view, self.explicit_view, self.foxglove, self.mcap = view, explicit_view, foxglove, mcap
         self.feed: LiveFeed | None = None
+        self.browser: Any = None  # the view's process (process.BrowserViewProcess), once prepared
         self.running: list = []
 
     @staticmethod
@@ -195,14 +196,28 @@ class Watching:
         foxglove = parse_listen("--foxglove", args.foxglove)
         # viser and foxglove-sdk take a while to import: before the loop runs, never on it
         if view is not None:
-            importlib.import_module("emulator.view.browser")
+            importlib.import_module("emulator.view.process")
         if foxglove is not None or args.mcap is not None:
             importlib.import_module("emulator.view.foxglove_live")
         return Watching(view, args.view is not None, foxglove, args.mcap)
 
     def prepare(self, daemon: Daemon, sensors: Sequence[str] | None, token: str | None) -> None:
+        """Before the daemon's loop runs: start the view's process (spawning it and importing
+        viser take a while); a default view whose port is taken stays off, with a note."""
         self.daemon, self.token = daemon, token
         self.served = [spec for spec in daemon.scene.sensors if sensors is None or spec.name in sensors]
+        self.browser = None
+        if self.view is not None:
+            from emulator.view.process import BrowserViewProcess, PortTaken, ViewFailed
+
+            try:
+                self.browser = BrowserViewProcess(daemon.scene, self.view)
+            except PortTaken as taken:
+                if self.explicit_view:
+                    raise UserError(f"--view {self.view[0]}:{self.view[1]}: {taken}") from None
+                print(f"view off: {taken} (choose one with --view HOST:PORT)", file=sys.stderr, flush=True)
+            except ViewFailed as failed:
+                raise UserError(f"--view {self.view[0]}:{self.view[1]}: {failed}") from None
 
     def start(self, control_url: str | None) -> None:
         """On the loop thread, once every endpoint (and the control API) serves: start what was
@@ -220,25 +235,16 @@ class Watching:
             self.running.append(publisher)
             if publisher.url is not None:
                 print(f"ready foxglove {publisher.url}", flush=True)
-        if self.view is not None:
-            from emulator.view.browser import BrowserView, PortTaken
-            from emulator.view.control_client import ControlClient
-
-            control = ControlClient(control_url, self.token) if control_url is not None else None
-            try:
-                browser = BrowserView(daemon.scene, feed, snapshots, daemon.clock, self.view, control)
-            except PortTaken as taken:
-                if self.explicit_view:
-                    raise UserError(f"--view {self.view[0]}:{self.view[1]}: {taken}") from None
-                print(f"view off: {taken} (choose one with --view HOST:PORT)", file=sys.stderr, flush=True)
-            else:
-                browser.start()
-                self.running.append(browser)
-                print(f"ready view {browser.url}", flush=True)
+        if self.browser is not None:
+            self.browser.start(feed, snapshots, daemon.clock, control_url, self.token)
+            self.running.append(self.browser)
+            print(f"ready view {self.browser.url}", flush=True)
         feed.start(daemon.scan_caches, {spec.name: configured_request(spec) for spec in self.served},
                    asyncio.get_running_loop())
 
     def stop(self) -> None:
+        if self.browser is not None and self.browser not in self.running:
+            self.running.append(self.browser)  # started, but the daemon stopped before it served
         for watcher in reversed(self.running):
             watcher.stop()
         self.running.clear()

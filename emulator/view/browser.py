@@ -1,10 +1,11 @@
 """The browser view (`serve --view HOST:PORT`): the live scene in 3D, built on viser.
 
-viser serves its bundled web client and runs its own server thread; this
-module draws into it from one more thread of its own, at most UPDATE_RATE_HZ
-times a second, and only while a browser is connected (with none, the thread
-wakes, sees no client and sleeps: nothing is computed or sent). Nothing here
-runs on the daemon's loop.
+viser serves its bundled web client and runs its own server thread; all of
+it lives in the view's own process (`process.py`), at a lowered priority, so
+its work (serialising point clouds and scene updates, the web socket) never
+holds the daemon's GIL or takes a core from its loop. The daemon sends it the
+world and the latest scans at most `process.UPDATE_RATE_HZ` times a second, and only
+while a browser is connected.
 
 Drawn: the solids in their materials' colours; smoke regions as translucent
 volumes whose opacity follows their density now (`recording/scene_look.py`);
@@ -19,10 +20,8 @@ and pause, and a gizmo per live body; each acts through the control API
 
 from __future__ import annotations
 
-import logging
 import socket
-import threading
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 import numpy as np
 import rich
@@ -43,9 +42,8 @@ from emulator.scene.model import Box, Cylinder, Pose, Scene, Shape, Sphere
 from emulator.scene.geometry import shape_mesh
 from emulator.sensors.scan import Scan
 from emulator.view.control_client import ControlClient, ControlError
-from emulator.view.feed import LiveFeed
+from emulator.view.process import PortTaken
 
-UPDATE_RATE_HZ = 10.0
 MAX_TRAJECTORY_POINTS = 600
 TRAJECTORY_RGB = (255, 140, 0)
 INITIAL_CAMERA = ((-5.0, -7.0, 7.0), (3.0, 0.0, 0.0))  # behind and above the origin, where scenes put the robot
@@ -54,11 +52,6 @@ ERROR_RGB = (230, 20, 20)
 SCAN_POINT_SIZE = 0.05
 GIZMO_SCALE_M = 1.2  # arrow length; its plane handles sit at 0.14..0.37 of it
 MAX_RANGE_FOR_COLOUR_M = {"urg-04lx": 5.6, "lms200": 20.0}
-log = logging.getLogger(__name__)
-
-
-class PortTaken(Exception):
-    """The view's port is in use."""
 
 
 def _wxyz(rotation_deg: tuple[float, float, float]) -> tuple[float, float, float, float]:
@@ -101,44 +94,37 @@ def _port_free(host: str, port: int) -> bool:
 
 
 class BrowserView:
-    """The viser server, the scene drawn into it, its panel, and the update thread."""
+    """The viser server, the scene drawn into it, and its panel; `update` redraws the world.
 
-    def __init__(
-        self, scene: Scene, feed: LiveFeed, snapshot: SceneSnapshots, clock: Any,
-        listen: tuple[str, int], control: ControlClient | None = None,
-    ) -> None:
+    It runs in the view's own process (`process.py`), which feeds it."""
+
+    def __init__(self, scene: Scene, listen: tuple[str, int], on_watchers: Callable[[int], None]) -> None:
         host, port = listen
         if port != 0 and not _port_free(host, port):
             raise PortTaken(f"{host}:{port} is in use")
-        self.scene, self._feed, self._snapshot, self._clock, self._control = scene, feed, snapshot, clock, control
+        self.scene = scene
         rich.reconfigure(quiet=True)  # viser's banners must not mix with `ready` lines on stdout
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.server.request_share_url = lambda *args, **kwargs: None  # never tunnel the view off this machine
         self.server.gui.configure_theme(show_share_button=False, control_width="large")
         self.url = f"http://{host}:{self.server.get_port()}"
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="view", daemon=True)
-        self._drawn_scans: dict[str, Scan] = {}
         self._clouds: dict[str, Any] = {}
         self._bodies: dict[str, Any] = {}
         self._sensors: dict[str, Any] = {}
         self._gizmos: dict[str, Any] = {}
         self._smoke: dict[str, Any] = {}
         self._sliders: dict[str, Any] = {}
-        self._last_error: Any = None
         self._dragging: dict[str, bool] = {}
-        self.server.on_client_connect(lambda client: self._feed.watch())
-        self.server.on_client_disconnect(lambda client: self._feed.unwatch())
+        self._control: ControlClient | None = None
+        self.server.on_client_connect(lambda client: on_watchers(len(self.server.get_clients())))
+        self.server.on_client_disconnect(lambda client: on_watchers(len(self.server.get_clients())))
         self._draw_static()
-        self._build_panel()
+        self._time = self.server.gui.add_markdown("**t = 0.000 s**")
 
-    def start(self) -> None:
-        self._thread.start()
+    def watchers(self) -> int:
+        return len(self.server.get_clients())
 
     def stop(self) -> None:
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=2.0)
         self.server.stop()
 
     # ------------------------------------------------------------------ drawing
@@ -157,6 +143,7 @@ class BrowserView:
 
     def _draw_static(self) -> None:
         scene = self.scene
+        snapshots = SceneSnapshots(scene)  # keyframed paths need no live state
         self.server.scene.set_up_direction("+z")
         camera = self.server.initial_camera
         camera.position, camera.look_at = INITIAL_CAMERA
@@ -165,7 +152,7 @@ class BrowserView:
                 f"/bodies/{body.name}", axes_length=0.4, axes_radius=0.02,
                 wxyz=_wxyz(body.pose.rotation_deg), position=body.pose.position,
             )
-            self._draw_trajectory(body)
+            self._draw_trajectory(body, snapshots)
         for obj in scene.objects:
             rgb = tuple(int(255 * c) for c in material_rgb(scene, obj.material))
             parent = f"/bodies/{obj.body}" if obj.body is not None else "/solids"
@@ -180,23 +167,23 @@ class BrowserView:
             )
             self.server.scene.add_label(f"/sensors/{spec.name}/label", spec.name)
 
-    def _draw_trajectory(self, body: Any) -> None:
+    def _draw_trajectory(self, body: Any, snapshots: SceneSnapshots) -> None:
         """A keyframed body's path over its keyframes, as a line."""
         keyframes = getattr(body.trajectory, "times", None)
         if keyframes is None or len(keyframes) < 2:
             return
         step = max(0.05, float(keyframes[-1] - keyframes[0]) / MAX_TRAJECTORY_POINTS)
-        path = self._snapshot.trajectory(body.name, float(keyframes[0]), float(keyframes[-1]), step)
+        path = snapshots.trajectory(body.name, float(keyframes[0]), float(keyframes[-1]), step)
         segments = np.stack([path[:-1], path[1:]], axis=1).astype(np.float32)
         self.server.scene.add_line_segments(f"/trajectories/{body.name}", segments, colors=TRAJECTORY_RGB, thickness=0.03)
 
-    def _build_panel(self) -> None:
+    def build_panel(self, control: ControlClient | None) -> None:
+        """The panel's controls, each acting through `control` (None: the daemon has no control API)."""
         gui = self.server.gui
-        self._time = gui.add_markdown("**t = 0.000 s**")
-        if self._control is None:
+        if control is None:
             gui.add_markdown("Read-only: the daemon's control API is off.")
             return
-        control = self._control
+        self._control = control
         if self.scene.regions:
             with gui.add_folder("Smoke regions (density)"):
                 for region in self.scene.regions:
@@ -247,28 +234,14 @@ class BrowserView:
 
     # ------------------------------------------------------------------ updates
 
-    def _run(self) -> None:
-        while not self._stop.wait(1.0 / UPDATE_RATE_HZ):
-            if not self.server.get_clients():
-                continue  # nobody looking: nothing to compute or send
-            try:
-                self.update()
-            except Exception as error:  # a drawing bug must not stop the daemon; say it once
-                if repr(error) != repr(self._last_error):
-                    log.exception("view update failed")
-                self._last_error = error
-
-    def update(self) -> None:
-        """Draw the world at the clock's now and each sensor's latest scan."""
-        snapshot = self._snapshot(self._clock.now())
+    def update(self, snapshot: WorldSnapshot, scans: Mapping[str, Scan]) -> None:
+        """Draw the world `snapshot` and each sensor's latest scan among `scans`."""
         with self.server.atomic():
             self._time.content = f"**t = {snapshot.time_s:.3f} s**"
             self._draw_poses(snapshot)
             self._draw_smoke(snapshot)
-            for name, scan in list(self._feed.latest.items()):
-                if self._drawn_scans.get(name) is not scan:
-                    self._draw_scan(scan, snapshot.sensor_poses.get(name, Pose()))
-                    self._drawn_scans[name] = scan
+            for name, scan in scans.items():
+                self._draw_scan(scan, snapshot.sensor_poses.get(name, Pose()))
 
     def _draw_poses(self, snapshot: WorldSnapshot) -> None:
         for name, pose in snapshot.body_poses.items():
