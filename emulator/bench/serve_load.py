@@ -33,6 +33,7 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -176,8 +177,9 @@ def measure_serve(
 
 
 def _stream_all(
-    daemon: ServeProcess, count: int, lms_count: int, duration_s: float
+    daemon: ServeProcess, count: int, lms_count: int, duration_s: float, on_window: Callable[[], None] | None = None
 ) -> tuple[list[_Stream], list[_LmsStream], tuple[float, float]]:
+    """Stream from every sensor; `on_window` is called as the measuring window opens and closes."""
     selector = selectors.DefaultSelector()
     streams: list[_Stream] = []
     lms_streams: list[_LmsStream] = []
@@ -200,6 +202,8 @@ def _stream_all(
         while (now := time.monotonic()) < measure_to:
             if cpu_before is None and now >= measure_from:
                 cpu_before, loop_before = cpu_seconds(daemon.pid), cpu_seconds(daemon.pid, children=False)
+                if on_window is not None:
+                    on_window()
                 for stream in everyone:  # the window starts here: forget the warm-up
                     stream.forget()
             for key, _ in selector.select(timeout=0.05):
@@ -208,6 +212,8 @@ def _stream_all(
                     raise RuntimeError("the daemon closed a stream")
                 key.data.feed(data, time.monotonic())
         cpu = cpu_seconds(daemon.pid) - (cpu_before or 0.0), cpu_seconds(daemon.pid, children=False) - (loop_before or 0.0)
+        if on_window is not None:
+            on_window()
     finally:
         for stream in everyone:
             selector.unregister(stream.sock)

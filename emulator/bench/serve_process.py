@@ -164,6 +164,19 @@ class ServeProcess:
                 return ready
         raise KeyError(f"{sensor} ({scheme or 'any'}) not among {self.ready}")
 
+    def stats(self, timeout_s: float = 10.0) -> dict[str, int]:
+        """The daemon's counters now: SIGUSR1, then its next `stats k=v ...` line on stderr."""
+        seen = sum(chunk.startswith("stats ") for chunk in self._stderr_chunks)
+        self.process.send_signal(signal.SIGUSR1)
+        deadline = time.monotonic() + timeout_s
+        while True:
+            lines = [chunk for chunk in self._stderr_chunks if chunk.startswith("stats ")]
+            if len(lines) > seen:
+                return {key: int(value) for key, value in (field.split("=") for field in lines[-1].split()[1:])}
+            if time.monotonic() > deadline or self.process.poll() is not None:
+                raise ServeError(f"no stats line after SIGUSR1\n{self.stderr}")
+            time.sleep(0.005)
+
     def stop(self, timeout_s: float = 10.0) -> int:
         """SIGTERM, then wait: the daemon's exit status (SIGKILL and ServeError if it hangs)."""
         if self.process.poll() is None:

@@ -49,7 +49,7 @@ from emulator.sensors.scan import Scan
 from emulator.transport.pty import PtyEndpoint
 from emulator.transport.rfc2217 import Rfc2217Endpoint
 from emulator.transport.tcp import IDLE_TIMEOUT_S, TcpEndpoint
-from emulator.transport.timer import PreciseTimer, shared_timer
+from emulator.transport.timer import LATE_THRESHOLDS_MS, PreciseTimer, shared_timer
 from protocols.device import Device, Output
 from protocols.lms2xx import Lms200Device
 from protocols.scip import UrgDevice
@@ -482,8 +482,10 @@ class Daemon:
             self._timer = None
 
     def stats(self) -> dict[str, int]:
-        """Counters for operators and leak tests (printed on SIGUSR1)."""
+        """Counters for operators, leak tests and the bench (printed on SIGUSR1); `wakes` and
+        `late_Nms`: the loop's timer wake-ups, and those more than N ms late (timer.py)."""
         links = [endpoint.link for endpoint in self.endpoints if endpoint.link is not None]
+        timer = self._timer
         return {
             "endpoints": len(self.endpoints),
             "clients": len(links),
@@ -493,4 +495,6 @@ class Daemon:
             "scan_waits": sum(cache.waits for cache in self.scan_caches.values()),
             "tasks": len(asyncio.all_tasks()),
             "fds": len(os.listdir("/proc/self/fd")),
+            "wakes": timer.wakes if timer is not None else 0,
+            **{f"late_{ms}ms": timer.late[index] if timer is not None else 0 for index, ms in enumerate(LATE_THRESHOLDS_MS)},
         }

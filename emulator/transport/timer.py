@@ -24,6 +24,7 @@ import time
 import weakref
 from typing import Any, Callable
 
+LATE_THRESHOLDS_MS = (1, 2, 5)  # wake-ups counted as later than each (`PreciseTimer.late`)
 _CLOCK_MONOTONIC = 1
 _TFD_NONBLOCK = os.O_NONBLOCK
 _TFD_CLOEXEC = os.O_CLOEXEC
@@ -70,7 +71,12 @@ class TimerHandle:
 
 class PreciseTimer:
     """`call_at` / `call_later` on `time.monotonic()` (the loop's own clock).
-    Create and use it on the loop's thread."""
+    Create and use it on the loop's thread.
+
+    It counts its wake-ups and how many ran their first callback later than
+    each of LATE_THRESHOLDS_MS after its time (`wakes`, `late`): what the loop
+    thread itself saw, whatever kept it (a busy CPU, another thread holding the
+    GIL), free of any client's own scheduling."""
 
     def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
         self._loop = loop
@@ -78,6 +84,8 @@ class PreciseTimer:
         self._order = itertools.count()
         self._armed_at: float | None = None
         self._spec = _Itimerspec()
+        self.wakes = 0
+        self.late = [0] * len(LATE_THRESHOLDS_MS)
         self._fd = _check(_libc.timerfd_create(_CLOCK_MONOTONIC, _TFD_NONBLOCK | _TFD_CLOEXEC))
         loop.add_reader(self._fd, self._on_expiry)
 
@@ -105,6 +113,12 @@ class PreciseTimer:
         if _SHARED.get(self._loop) is self:
             del _SHARED[self._loop]  # the entry would keep the loop alive
 
+    def _count_lateness(self, late_ms: float) -> None:
+        self.wakes += 1
+        for index, threshold in enumerate(LATE_THRESHOLDS_MS):
+            if late_ms > threshold:
+                self.late[index] += 1
+
     def _arm(self, when: float) -> None:
         """Expire at monotonic time `when` (at once if that has passed)."""
         when = max(when, 1e-9)  # an all-zero it_value would disarm the timer
@@ -122,6 +136,8 @@ class PreciseTimer:
         self._armed_at = None
         now = time.monotonic()
         heap = self._heap
+        if heap and not heap[0][2].cancelled and heap[0][0] <= now:
+            self._count_lateness((now - heap[0][0]) * 1000.0)
         try:
             while heap and (heap[0][2].cancelled or heap[0][0] <= now):
                 heapq.heappop(heap)[2]._run()  # may schedule more (arming if earlier)

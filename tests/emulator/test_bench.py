@@ -59,10 +59,12 @@ def test_bench_json_reports_every_bundled_sensor_and_every_section():
     assert changes["violations"] == 0  # no scan stamped after a change shows the world before it
     assert 0 <= changes["simulated"]["p50_ms"] <= changes["simulated"]["max_ms"]
     assert report["control_jitter"]["pose_stream_100hz"]["poses_sent"] > 0
-    # what watching costs: view off, view unwatched, view in chromium, --mcap
-    assert [row["case"] for row in report["view"]] == ["view off", "view, no browser", "view + chromium", "--mcap"]
+    # what watching costs: view off, view unwatched, view in chromium (twice: nice 0 and 19), --mcap
+    assert [row["case"] for row in report["view"]] == [
+        "view off", "view, no browser", "view + chromium", "view + chromium nice 19", "--mcap"]
     assert all(row["rate"] > 0.5 and row["cpu_ms_per_scan"] > 0 for row in report["view"])
-    assert report["view"][3]["mcap_bytes"] > 0
+    assert all(row["loop_wakes"] > 0 and 0 <= row["loop_late_2ms"] <= 1 for row in report["view"])  # the daemon's counts
+    assert report["view"][4]["mcap_bytes"] > 0
 
 
 def test_bench_table_shows_only_the_chosen_sections():

@@ -20,7 +20,7 @@ from emulator.daemon.service import Daemon, Ready
 from emulator.errors import UserError
 from emulator.scene.model import Pose, Scene, SensorSpec
 from emulator.sensors.scan import Scan
-from emulator.transport.timer import PreciseTimer
+from emulator.transport.timer import LATE_THRESHOLDS_MS, PreciseTimer
 
 
 def scene_with(*sensors: SensorSpec) -> Scene:
@@ -168,3 +168,19 @@ def test_precise_timer_runs_in_order_skips_cancelled_and_is_sub_millisecond() ->
     lateness_ms = [(at - (start + 0.013 * i)) * 1000 for i, at in fired]
     assert min(lateness_ms) >= 0
     assert statistics.median(lateness_ms) < 0.5, lateness_ms
+
+
+def test_precise_timer_counts_a_wake_up_the_loop_was_kept_from() -> None:
+    """A loop busy for 20 ms past a timer's time makes that wake-up late by more than every threshold."""
+    loop = asyncio.new_event_loop()
+    timer = PreciseTimer(loop)
+    fired: list[float] = []
+    due = time.monotonic() + 0.005
+    timer.call_at(due, lambda: fired.append(time.monotonic()))
+    loop.call_soon(time.sleep, 0.025)  # the loop's thread is held (as by another thread with the GIL)
+    loop.run_until_complete(asyncio.sleep(0.05))
+    timer.close()
+    loop.close()
+    assert len(fired) == 1 and fired[0] - due >= 0.02
+    assert timer.wakes == 1
+    assert timer.late == [1] * len(LATE_THRESHOLDS_MS)
