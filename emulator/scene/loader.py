@@ -218,7 +218,7 @@ MAX_EXTENT_M = 100_000.0  # every coordinate, length, speed (m, m/s) lies within
 MAX_PARTICLES_ALIVE = 20_000  # Σ over plumes of rate × lifetime (railway has 80; 10 000 cost 24 ms a scan)
 MAX_SCENE_ITEMS = 10_000  # objects + smoke regions + plumes
 MAX_MESH_TRIANGLES = 2_000_000  # triangles of every mesh file, counted once per use
-MAX_SENSORS = 64
+MAX_SENSORS = 256  # a fleet-sized scene: issue 16's moonshot serves 120 from one daemon
 MAX_ENDPOINTS_PER_SENSOR = 8
 
 

@@ -62,6 +62,8 @@ SCENES: dict[str, tuple[str, tuple[str, ...]]] = {
     "garbage glb": (MESH.format(mesh="garbage.glb") + SENSOR, ("objects[0].mesh", "garbage.glb")),
     "fifo as mesh": (MESH.format(mesh="fifo.stl") + SENSOR, ("objects[0].mesh", "not a regular file")),
     "directory as mesh": (MESH.format(mesh="folder.obj") + SENSOR, ("objects[0].mesh", "not a regular file")),
+    "257 sensors": ("".join(SENSOR.replace('"urg"', f'"u{i}"').replace("ttyURG0", f"ttyU{i}") for i in range(257)),
+                    ("sensors[256]", "257 sensors; a scene may have at most 256")),
     "no sensors": (BOX.format(size=1.0), ("sensors",)),
     "empty file": ("", ("sensors",)),
 }
