@@ -7,9 +7,11 @@ daemon) is undone by the code that made it, and nothing prints a traceback.
 
 from __future__ import annotations
 
-import signal
+# The C module, imported at once: `signal` builds its enums for a few ms after start-up, a window in
+# which a ^C used to land and print a traceback before these handlers were in place.
+import _signal
 
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT)
+STOP_SIGNALS = (_signal.SIGINT, _signal.SIGTERM, _signal.SIGHUP, _signal.SIGQUIT)
 
 
 class Interrupted(KeyboardInterrupt):
@@ -17,6 +19,8 @@ class Interrupted(KeyboardInterrupt):
     A KeyboardInterrupt, so asyncio lets it through its callbacks as it does ^C."""
 
     def __init__(self, signum: int) -> None:
+        import signal
+
         super().__init__(signal.Signals(signum).name)
         self.signum = signum
 
@@ -29,7 +33,7 @@ def hold_stop_signals() -> None:
     """Catch stop signals from now on, holding them until `raise_on_stop_signals` (a
     signal that lands while modules are still being imported must not print a traceback)."""
     for signum in STOP_SIGNALS:
-        signal.signal(signum, _on_stop_signal)
+        _signal.signal(signum, _on_stop_signal)
 
 
 def raise_on_stop_signals() -> None:
