@@ -186,6 +186,7 @@ class Watching:
         self.view, self.explicit_view, self.foxglove, self.mcap = view, explicit_view, foxglove, mcap
         self.feed: LiveFeed | None = None
         self.browser: Any = None  # the view's process (process.BrowserViewProcess), once prepared
+        self.publisher: Any = None  # the Foxglove/MCAP process (foxglove_live.FoxglovePublisher), once prepared
         self.running: list = []
 
     @staticmethod
@@ -202,22 +203,37 @@ class Watching:
         return Watching(view, args.view is not None, foxglove, args.mcap)
 
     def prepare(self, daemon: Daemon, sensors: Sequence[str] | None, token: str | None) -> None:
-        """Before the daemon's loop runs: start the view's process (spawning it and importing
-        viser take a while); a default view whose port is taken stays off, with a note."""
+        """Before the daemon's loop runs: start the Foxglove/MCAP and the view's processes
+        (spawning them and importing foxglove and viser take a while); a default view whose
+        port is taken stays off, with a note."""
         self.daemon, self.token = daemon, token
         self.served = [spec for spec in daemon.scene.sensors if sensors is None or spec.name in sensors]
-        self.browser = None
-        if self.view is not None:
-            from emulator.view.process import BrowserViewProcess, PortTaken, ViewFailed
+        self.browser = self.publisher = None
+        if self.foxglove is not None or self.mcap is not None:
+            from emulator.view.foxglove_live import FoxglovePublisher
 
+            self.publisher = FoxglovePublisher(daemon.scene, sensors=[spec.name for spec in self.served],
+                                               mcap_path=self.mcap, websocket=self.foxglove)
+        if self.view is not None:
             try:
-                self.browser = BrowserViewProcess(daemon.scene, self.view)
-            except PortTaken as taken:
-                if self.explicit_view:
-                    raise UserError(f"--view {self.view[0]}:{self.view[1]}: {taken}") from None
-                print(f"view off: {taken} (choose one with --view HOST:PORT)", file=sys.stderr, flush=True)
-            except ViewFailed as failed:
-                raise UserError(f"--view {self.view[0]}:{self.view[1]}: {failed}") from None
+                self.browser = self._start_view(daemon.scene)
+            except BaseException:
+                self.stop()  # the Foxglove/MCAP process closes its file
+                raise
+
+    def _start_view(self, scene: Scene) -> Any:
+        from emulator.view.process import BrowserViewProcess, PortTaken, ViewFailed
+
+        assert self.view is not None
+        try:
+            return BrowserViewProcess(scene, self.view)
+        except PortTaken as taken:
+            if self.explicit_view:
+                raise UserError(f"--view {self.view[0]}:{self.view[1]}: {taken}") from None
+            print(f"view off: {taken} (choose one with --view HOST:PORT)", file=sys.stderr, flush=True)
+            return None
+        except ViewFailed as failed:
+            raise UserError(f"--view {self.view[0]}:{self.view[1]}: {failed}") from None
 
     def start(self, control_url: str | None) -> None:
         """On the loop thread, once every endpoint (and the control API) serves: start what was
@@ -225,16 +241,11 @@ class Watching:
         daemon, feed = self.daemon, self.feed
         assert feed is not None
         snapshots = SceneSnapshots(daemon.scene, daemon.live)
-        if self.foxglove is not None or self.mcap is not None:
-            from emulator.view.foxglove_live import FoxglovePublisher
-
-            publisher = FoxglovePublisher(daemon.scene, feed, snapshots, daemon.clock.now,
-                                          sensors=[spec.name for spec in self.served],
-                                          mcap_path=self.mcap, websocket=self.foxglove)
-            publisher.start()
-            self.running.append(publisher)
-            if publisher.url is not None:
-                print(f"ready foxglove {publisher.url}", flush=True)
+        if self.publisher is not None:
+            self.publisher.start(feed, snapshots, daemon.clock.now)
+            self.running.append(self.publisher)
+            if self.publisher.url is not None:
+                print(f"ready foxglove {self.publisher.url}", flush=True)
         if self.browser is not None:
             self.browser.start(feed, snapshots, daemon.clock, control_url, self.token)
             self.running.append(self.browser)
@@ -243,8 +254,9 @@ class Watching:
                    asyncio.get_running_loop())
 
     def stop(self) -> None:
-        if self.browser is not None and self.browser not in self.running:
-            self.running.append(self.browser)  # started, but the daemon stopped before it served
+        for started in (self.publisher, self.browser):
+            if started is not None and started not in self.running:
+                self.running.append(started)  # started, but the daemon stopped before it served
         for watcher in reversed(self.running):
             watcher.stop()
         self.running.clear()

@@ -2,31 +2,39 @@
 
 One foxglove-sdk `Context` holds the scene's channels (`recording/mcap.py`);
 the WebSocket server and the MCAP writer are sinks of it, so both get the
-same messages. Everything is encoded and written on the publisher's own
-thread: it takes scans from its `LiveFeed` queue, and at most WORLD_RATE_HZ
-times a second logs the transforms, smoke and plumes at the clock's now.
-The solid geometry is logged once, and again whenever a Foxglove client
-subscribes to `/scene` (a live stream keeps no history for late-comers).
+same messages. Encoding (protobuf for every scan) and writing are Python and
+file I/O that would hold the daemon's GIL, so they run in a process of their
+own (spawned before the daemon's loop runs, at FOXGLOVE_NICE), like the
+browser view's (`process.py`). The daemon's `foxglove` thread takes every
+scan from its `LiveFeed` queue and sends them over a pipe, and at most
+WORLD_RATE_HZ times a second the world's snapshot at the clock's now
+(transforms, smoke, plumes). The solid geometry is logged once, and again
+whenever a Foxglove client subscribes to `/scene` (a live stream keeps no
+history for late-comers). At the end the daemon sends what is still queued
+and waits for the MCAP file to be closed (its summary written).
 """
 
 from __future__ import annotations
 
+import multiprocessing
+import multiprocessing.connection
+import os
 import queue
+import signal
 import threading
 import time
 from pathlib import Path
-from typing import Callable
-
-import foxglove
-from foxglove.websocket import ChannelView, Client
+from typing import Any, Callable
 
 from emulator.errors import UserError
-from emulator.recording.mcap import SceneChannels, open_mcap_file
 from emulator.recording.world_snapshot import WorldSnapshot
 from emulator.scene.model import Scene
 from emulator.view.feed import LiveFeed
+from emulator.view.process import START_TIMEOUT_S
 
 WORLD_RATE_HZ = 10.0
+FOXGLOVE_NICE = 10
+STOP_TIMEOUT_S = 30.0  # the child writes what is queued and the MCAP summary
 
 
 class _SceneSubscriptions:
@@ -35,87 +43,153 @@ class _SceneSubscriptions:
     def __init__(self, wanted: threading.Event) -> None:
         self._wanted = wanted
 
-    def on_subscribe(self, client: Client, channel: ChannelView) -> None:
+    def on_subscribe(self, client: Any, channel: Any) -> None:
         if channel.topic == "/scene":
             self._wanted.set()
 
 
-class FoxglovePublisher:
-    """The scene's channels to an MCAP file and/or a Foxglove WebSocket server, on its own thread."""
+def _child_main(
+    scene: Scene, sensors: list[str], mcap_path: Path | None, websocket: tuple[str, int] | None,
+    connection: multiprocessing.connection.Connection, nice: int,
+) -> None:
+    """The publisher's process: open the sinks, say ready (or why not), log what arrives, close."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a terminal's Ctrl-C reaches the daemon, which stops us
+    os.nice(nice)
+    import foxglove
 
-    def __init__(
-        self, scene: Scene, feed: LiveFeed, snapshot: Callable[[float], WorldSnapshot], now: Callable[[], float],
-        *, sensors: list[str], mcap_path: Path | None = None, websocket: tuple[str, int] | None = None,
-    ) -> None:
-        self._feed, self._snapshot, self._now = feed, snapshot, now
-        self._context = foxglove.Context()
-        self._channels = SceneChannels(scene, self._context, sensors)
-        self._solids_wanted = threading.Event()
-        self._solids_wanted.set()
-        self._writer = open_mcap_file(mcap_path, self._context) if mcap_path is not None else None
-        self.server = None
-        self._server_host = websocket[0] if websocket is not None else ""
+    from emulator.recording.mcap import SceneChannels, open_mcap_file
+
+    context = foxglove.Context()
+    channels = SceneChannels(scene, context, sensors)
+    solids_wanted = threading.Event()
+    solids_wanted.set()
+    writer = server = None
+    try:
+        writer = open_mcap_file(mcap_path, context) if mcap_path is not None else None
         if websocket is not None:
             host, port = websocket
             try:
-                self.server = foxglove.start_server(
-                    name="lrf-emulator", host=host, port=port, context=self._context,
-                    server_listener=_SceneSubscriptions(self._solids_wanted),
-                )
+                server = foxglove.start_server(name="lrf-emulator", host=host, port=port, context=context,
+                                               server_listener=_SceneSubscriptions(solids_wanted))
             except Exception as error:  # foxglove raises its own error type for a port in use
-                self._close_writer()
                 raise UserError(f"--foxglove {host}:{port}: cannot listen: {error}") from None
-        self._scans = feed.subscribe()
+    except UserError as error:
+        if writer is not None:
+            writer.close()
+        connection.send(("failed", str(error)))
+        return
+    connection.send(("ready", None if server is None else f"ws://{websocket[0]}:{server.port}"))
+    try:
+        while True:
+            message = connection.recv()
+            if message[0] == "stop":
+                break
+            if message[0] == "scans":
+                for scan in message[1]:
+                    channels.log_scan(scan)
+            elif message[0] == "world":
+                snapshot: WorldSnapshot = message[1]
+                if solids_wanted.is_set():
+                    solids_wanted.clear()
+                    channels.log_solids(snapshot.time_s)
+                channels.log_world(snapshot)
+    except (EOFError, OSError):
+        pass  # the daemon went away: still close the file properly
+    finally:
+        if writer is not None:
+            writer.close()
+        if server is not None:
+            server.stop()
+        try:
+            connection.send(("closed", None))
+        except OSError:
+            pass
+
+
+class FoxglovePublisher:
+    """The daemon's side: the publisher's process, and the thread that feeds it."""
+
+    def __init__(
+        self, scene: Scene, *, sensors: list[str], mcap_path: Path | None = None,
+        websocket: tuple[str, int] | None = None, nice: int = FOXGLOVE_NICE,
+    ) -> None:
+        context = multiprocessing.get_context("spawn")
+        self._connection, child = context.Pipe()
+        self._process = context.Process(target=_child_main, args=(scene, sensors, mcap_path, websocket, child, nice),
+                                        name="lrf-foxglove", daemon=True)
+        self._process.start()
+        child.close()
+        self.url = self._wait_ready()
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="foxglove", daemon=True)
+        self._thread: threading.Thread | None = None
+        self._feed: LiveFeed | None = None
 
-    @property
-    def url(self) -> str | None:
-        """`ws://HOST:PORT` of the WebSocket server, if there is one."""
-        return None if self.server is None else f"ws://{self._server_host}:{self.server.port}"
+    def _wait_ready(self) -> str | None:
+        """`ws://HOST:PORT` of the WebSocket server (None without one), once the sinks are open."""
+        if not self._connection.poll(START_TIMEOUT_S):
+            self._process.kill()
+            raise UserError(f"the Foxglove/MCAP process did not start within {START_TIMEOUT_S:g} s")
+        try:
+            kind, detail = self._connection.recv()
+        except (EOFError, OSError):
+            raise UserError(f"the Foxglove/MCAP process ended at start-up (exit status {self._process.exitcode})") from None
+        if kind != "ready":
+            self._process.join(timeout=5.0)
+            raise UserError(detail)
+        return detail
 
-    def start(self) -> None:
-        self._feed.watch()
+    def start(self, feed: LiveFeed, snapshot: Callable[[float], WorldSnapshot], now: Callable[[], float]) -> None:
+        """Take every scan `feed` delivers from now on, and the world at `now`, to the process."""
+        self._feed = feed
+        scans = feed.subscribe()
+        feed.watch()
+        self._thread = threading.Thread(target=self._run, args=(scans, snapshot, now), name="foxglove", daemon=True)
         self._thread.start()
 
-    def stop(self) -> None:
-        """Write what is queued, close the MCAP file (finishing its summary), stop the server."""
-        self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=5.0)
-        self._feed.unwatch()
-        self._close_writer()
-        if self.server is not None:
-            self.server.stop()
-            self.server = None
-
-    def _close_writer(self) -> None:
-        if self._writer is not None:
-            self._writer.close()
-            self._writer = None
-
-    def _run(self) -> None:
+    def _run(self, scans: queue.Queue, snapshot: Callable[[float], WorldSnapshot], now: Callable[[], float]) -> None:
         next_world = 0.0
-        while not self._stop.is_set():
-            try:
-                scan = self._scans.get(timeout=1.0 / WORLD_RATE_HZ)
-            except queue.Empty:
-                scan = None
-            wall = time.monotonic()
-            if wall >= next_world:
-                self._log_world()
-                next_world = wall + 1.0 / WORLD_RATE_HZ
-            if scan is not None:
-                self._channels.log_scan(scan)
-        while True:  # what was delivered before the stop still goes into the file
-            try:
-                self._channels.log_scan(self._scans.get_nowait())
-            except queue.Empty:
-                break
+        try:
+            while not self._stop.is_set():
+                batch = []
+                try:
+                    batch.append(scans.get(timeout=1.0 / WORLD_RATE_HZ))
+                except queue.Empty:
+                    pass
+                batch += _drain(scans)
+                if batch:
+                    self._connection.send(("scans", batch))
+                wall = time.monotonic()
+                if wall >= next_world:
+                    self._connection.send(("world", snapshot(now())))
+                    next_world = wall + 1.0 / WORLD_RATE_HZ
+            rest = _drain(scans)  # what was delivered before the stop still goes into the file
+            if rest:
+                self._connection.send(("scans", rest))
+        except OSError:
+            pass  # the process ended: the daemon serves on without it
 
-    def _log_world(self) -> None:
-        now = self._now()
-        if self._solids_wanted.is_set():
-            self._solids_wanted.clear()
-            self._channels.log_solids(now)
-        self._channels.log_world(self._snapshot(now))
+    def stop(self) -> None:
+        """Send what is queued, then wait for the process to close the MCAP file and the server."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+        if self._feed is not None:
+            self._feed.unwatch()
+        try:
+            self._connection.send(("stop",))
+        except OSError:
+            pass
+        self._process.join(timeout=STOP_TIMEOUT_S)
+        if self._process.is_alive():
+            self._process.kill()
+            self._process.join(timeout=2.0)
+        self._connection.close()
+
+
+def _drain(scans: queue.Queue) -> list:
+    taken = []
+    while True:
+        try:
+            taken.append(scans.get_nowait())
+        except queue.Empty:
+            return taken
