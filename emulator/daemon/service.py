@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import math
 import os
 import sys
 from concurrent.futures import Executor, Future, ThreadPoolExecutor
@@ -357,7 +358,9 @@ class Daemon:
         self._timer = shared_timer(loop)
         readies = []
         for ordinal, (spec, addresses) in enumerate(self._plan):
-            scans = self.scan_caches[spec.name] = ScanCache(factory(spec), executor, phase=ordinal, observer=self._on_scan)
+            scans = self.scan_caches[spec.name] = ScanCache(
+                factory(spec), executor, phase=ordinal, observer=self._on_scan, defer=self._defer
+            )
             for position, address in enumerate(addresses):
                 device = self._device_factory(spec, scans, phase_ms=self._phase_ms(spec))
                 session = DeviceSession(
@@ -395,6 +398,14 @@ class Daemon:
             self._before_workers.clear()  # the pool keeps them from now on (a restarted worker replays them)
         pool = self.pool
         return (lambda spec: pool.sensor(spec.name)), pool.executor()
+
+    def _defer(self, sim_seconds: float, start: Callable[[], None]) -> None:
+        """Run `start` on the loop `sim_seconds` of simulated time from now (at once if the clock is paused)."""
+        delay = self.clock.wall_delay(sim_seconds)
+        if self._timer is None or not math.isfinite(delay):
+            start()
+        else:
+            self._timer.call_later(delay, start)
 
     def _phase_ms(self, spec: SensorSpec) -> int:
         """A simulated URG's revolution phase in its scene (a supplied scan source keeps phase 0: a replay's

@@ -159,3 +159,76 @@ def test_a_stream_prefetched_several_scans_ahead_is_still_computed_in_batches(
     assert [len(times) for kind, times in recording.calls if kind == "scans"][1:] == [SCAN_BATCH] * 4
     ticks = recording.computed_ticks()
     assert len(ticks) == len(set(ticks)), "a scan was computed twice"
+
+
+def ticks(times: Sequence[float]) -> list[int]:
+    return [round(t / TICK) for t in times]
+
+
+class DeferredStarts:
+    """The daemon's `defer`, by hand: what each batch asked to run, and how much later."""
+
+    def __init__(self) -> None:
+        self.waiting: list[tuple[float, Any]] = []
+
+    def __call__(self, delay_s: float, start: Any) -> None:
+        self.waiting.append((delay_s, start))
+
+    def run_all(self) -> None:
+        waiting, self.waiting = self.waiting, []
+        for _, start in waiting:
+            start()
+
+
+def test_a_streams_batch_starts_half_a_stride_later_in_the_quiet_between_scans(
+    sensor: LmsSensor, request_keywords: dict[str, Any], scan_thread: ThreadPoolExecutor
+) -> None:
+    """Foreseen while a scan is being delivered, the next batch is started half a stride later,
+    so its worker does not compete with that delivery; meanwhile its scans are already held."""
+    recording = Recording(sensor)
+    deferred = DeferredStarts()
+    cache = ScanCache(recording, scan_thread, defer=deferred)
+    served = [cache(index * LMS_SCAN_PERIOD_S, **request_keywords) for index in (1, 2, 3)]
+    assert [kind for kind, _ in recording.calls] == ["scan"] * 3  # the batch is foreseen, not started
+    assert [delay for delay, _ in deferred.waiting] == [pytest.approx(LMS_SCAN_PERIOD_S / 2)]
+    ahead = cache.pending(4 * LMS_SCAN_PERIOD_S)
+    assert ahead is not None and not ahead.done()  # a device waiting for it finds it
+    deferred.run_all()
+    ahead.result(timeout=30)
+    kind, times = recording.calls[3]
+    assert kind == "scans" and ticks(times) == [round(index * LMS_SCAN_PERIOD_S / TICK) for index in range(4, 4 + SCAN_BATCH)]
+    deferred.run_all()  # nothing is started twice
+    served.append(cache(4 * LMS_SCAN_PERIOD_S, **request_keywords))
+    assert len(recording.calls) == 4
+    reference = railway_lms()
+    for index, scan in zip((1, 2, 3, 4), served):
+        np.testing.assert_array_equal(scan.values, reference.scan(index * LMS_SCAN_PERIOD_S, **request_keywords).values)
+
+
+def test_a_caller_that_needs_a_scan_of_a_batch_not_yet_started_starts_it_at_once(
+    sensor: LmsSensor, request_keywords: dict[str, Any], scan_thread: ThreadPoolExecutor
+) -> None:
+    recording = Recording(sensor)
+    deferred = DeferredStarts()
+    cache = ScanCache(recording, scan_thread, defer=deferred)
+    for index in (1, 2, 3):
+        cache(index * LMS_SCAN_PERIOD_S, **request_keywords)
+    scan = cache(5 * LMS_SCAN_PERIOD_S, **request_keywords)  # would wait forever for a start that never comes
+    assert scan.time_s == 5 * LMS_SCAN_PERIOD_S and recording.calls[3][0] == "scans"
+    deferred.run_all()
+    assert [kind for kind, _ in recording.calls].count("scans") == 1
+
+
+def test_scans_a_live_change_drops_before_their_batch_starts_are_not_computed(
+    sensor: LmsSensor, request_keywords: dict[str, Any], scan_thread: ThreadPoolExecutor
+) -> None:
+    recording = Recording(sensor)
+    deferred = DeferredStarts()
+    cache = ScanCache(recording, scan_thread, defer=deferred)
+    for index in (1, 2, 3):
+        cache(index * LMS_SCAN_PERIOD_S, **request_keywords)
+    cache.invalidate_from(8 * LMS_SCAN_PERIOD_S)  # scans 8.. of the foreseen batch 4..11 are dropped
+    deferred.run_all()
+    scan_thread.shutdown(wait=True)
+    batch = [times for kind, times in recording.calls if kind == "scans"][0]
+    assert ticks(batch) == [round(index * LMS_SCAN_PERIOD_S / TICK) for index in range(4, 8)]
