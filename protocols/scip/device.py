@@ -210,7 +210,7 @@ class UrgDevice:
         """With fast timing, the scan a GD/GS received at `now` reads at once: a daemon
         computes it before handing the bytes over, so that answering never waits on a
         computation (with real timing a GD waits for a later scan, a deadline of its own)."""
-        return self._scan_time(_latest_scan_index(now - self._phase_s)) if self._fast else None
+        return self._scan_time(self._latest_revolution(now)) if self._fast else None
 
     def connection_lost(self) -> None:
         """Streaming stops and unanswered commands are forgotten; the unit keeps
@@ -248,7 +248,7 @@ class UrgDevice:
         stream = self._stream
         if stream is None:
             return []
-        latest = _latest_scan_index(now - self._phase_s) - (before and _on_grid(now - self._phase_s))
+        latest = self._latest_revolution(now) - (before and _on_grid(now - self._phase_s))
         if stream.next_index > latest:
             return []
         period = stream.request.interval + 1
@@ -388,7 +388,7 @@ class UrgDevice:
         if not self._laser_on:
             return _reply(echo, b"10")
         if self._fast:
-            index = _latest_scan_index(now - self._phase_s)
+            index = self._latest_revolution(now)
         else:
             measured_from = received - self._phase_s - MEASUREMENT_START_S
             index = math.ceil(measured_from * SCANS_PER_SECOND - _EPSILON_S) + 1
@@ -439,6 +439,10 @@ class UrgDevice:
             if stream.remaining <= 0:
                 self._stream, self._laser_on = None, False
 
+    def _latest_revolution(self, now: float) -> int:
+        """Index of this unit's last revolution completed at `now` (its phase taken into account)."""
+        return _latest_scan_index(now - self._phase_s)
+
     def _scan_time(self, index: int) -> float:
         """When revolution `index` completes (simulated s): a whole millisecond, so its stamp is exact."""
         return (index * (1000 // SCANS_PER_SECOND) + self._phase_ms) / 1000
@@ -459,7 +463,7 @@ class UrgDevice:
             self._protocol = "scip2"
             return scip1.SWITCH_REPLY
         return scip1.reply(
-            line.text, lambda: np.asarray(self._scan_at(_latest_scan_index(now - self._phase_s)).values), self._serial
+            line.text, lambda: np.asarray(self._scan_at(self._latest_revolution(now)).values), self._serial
         )
 
 

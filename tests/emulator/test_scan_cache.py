@@ -180,6 +180,19 @@ class DeferredStarts:
             start()
 
 
+def stream_made_steady(
+    sensor: LmsSensor, request_keywords: dict[str, Any], scan_thread: ThreadPoolExecutor
+) -> tuple[Recording, DeferredStarts, ScanCache]:
+    """A cache that defers by hand, asked for scans 1, 2, 3: the third makes the stream steady and
+    foresees the batch 4..11, which waits in `deferred`."""
+    recording = Recording(sensor)
+    deferred = DeferredStarts()
+    cache = ScanCache(recording, scan_thread, defer=deferred)
+    for index in (1, 2, 3):
+        cache(index * LMS_SCAN_PERIOD_S, **request_keywords)
+    return recording, deferred, cache
+
+
 def test_a_streams_batch_starts_half_a_stride_later_in_the_quiet_between_scans(
     sensor: LmsSensor, request_keywords: dict[str, Any], scan_thread: ThreadPoolExecutor
 ) -> None:
@@ -208,11 +221,7 @@ def test_a_streams_batch_starts_half_a_stride_later_in_the_quiet_between_scans(
 def test_a_caller_that_needs_a_scan_of_a_batch_not_yet_started_starts_it_at_once(
     sensor: LmsSensor, request_keywords: dict[str, Any], scan_thread: ThreadPoolExecutor
 ) -> None:
-    recording = Recording(sensor)
-    deferred = DeferredStarts()
-    cache = ScanCache(recording, scan_thread, defer=deferred)
-    for index in (1, 2, 3):
-        cache(index * LMS_SCAN_PERIOD_S, **request_keywords)
+    recording, deferred, cache = stream_made_steady(sensor, request_keywords, scan_thread)
     scan = cache(5 * LMS_SCAN_PERIOD_S, **request_keywords)  # would wait forever for a start that never comes
     assert scan.time_s == 5 * LMS_SCAN_PERIOD_S and recording.calls[3][0] == "scans"
     deferred.run_all()
@@ -222,11 +231,7 @@ def test_a_caller_that_needs_a_scan_of_a_batch_not_yet_started_starts_it_at_once
 def test_scans_a_live_change_drops_before_their_batch_starts_are_not_computed(
     sensor: LmsSensor, request_keywords: dict[str, Any], scan_thread: ThreadPoolExecutor
 ) -> None:
-    recording = Recording(sensor)
-    deferred = DeferredStarts()
-    cache = ScanCache(recording, scan_thread, defer=deferred)
-    for index in (1, 2, 3):
-        cache(index * LMS_SCAN_PERIOD_S, **request_keywords)
+    recording, deferred, cache = stream_made_steady(sensor, request_keywords, scan_thread)
     cache.invalidate_from(8 * LMS_SCAN_PERIOD_S)  # scans 8.. of the foreseen batch 4..11 are dropped
     deferred.run_all()
     scan_thread.shutdown(wait=True)
