@@ -6,7 +6,7 @@ class UserError(Exception):
 
 
 class SceneError(UserError):
-    """A scene file breaks SCENE_FORMAT.md; the message names file, table and key (`key` alone:
+    """A scene file breaks the scene format (docs/scene-format.md); the message names file, table and key (`key` alone:
     the table path, such as `smoke.regions[room].density`, for answers that name it apart)."""
 
     def __init__(self, message: str, key: str = "") -> None:

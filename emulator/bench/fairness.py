@@ -5,7 +5,7 @@ the URG's TCP port with 64 KiB bursts of `GD0000076801` (each in its own
 process); an LMS200 host on the daemon's LMS pty, at 500 kBd and 180°/0.5°,
 measures its streamed scans per second against the nominal 37.5 and the
 time from a status request (31) to its whole reply. The same is measured
-first with nobody attacking. Targets (issue 17): within 1 % of the nominal
+first with nobody attacking. Targets: within 1 % of the nominal
 rate, replies within 50 ms.
 """
 

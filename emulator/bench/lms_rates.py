@@ -1,7 +1,7 @@
 """LMS200 scans per second delivered through the real daemon, against the line-rate limit.
 
 A real LMS200 measures 75 revolutions/s, but its serial line cannot carry a
-telegram per revolution below 500 kBd, so it skips scans (LMS2XX_LMS200.md).
+telegram per revolution below 500 kBd, so it skips scans (docs/lms200.md).
 This starts `lrf-emulator serve` with the LMS on a pty, drives it like a
 driver (baud switch with 20 4x following the port's termios, resolution with
 3B, continuous mode 20 24), counts complete CRC-valid B0 telegrams and

@@ -16,7 +16,7 @@ object and `lines` are printed in the table. Add a section by adding it to `SECT
   (`sensor.scans` of SCAN_BATCH consecutive scans, divided by SCAN_BATCH);
   one scan computed alone (a request nobody foresaw) is its own column.
   `railway-10k` is railway with its plume's rate raised until 10 000 particles
-  are alive at once (rate × lifetime), the plume-at-scale case of issue 16.
+  are alive at once (rate × lifetime), a plume at scale.
 - transport: command latency and MD scan jitter through a served daemon
   (`transport_latency`).
 - lms-rates: LMS200 scans/s per baud and resolution through a served daemon

@@ -296,7 +296,7 @@ def table_lines(rows: list[dict]) -> list[str]:
     return lines
 
 
-MOONSHOT = (100, 20, "formsma2011")  # URG-04LX, LMS200 at 500 kBd, preset: issue 16's moonshot
+MOONSHOT = (100, 20, "formsma2011")  # URG-04LX, LMS200 at 500 kBd, preset: the fleet-sized row
 
 
 def bench_section(quick: bool) -> tuple[dict, list[str]]:

@@ -3,7 +3,7 @@
 Measurements and interop checks must see what a driver sees: the installed
 daemon, its ptys and sockets, its line pacing. This starts it on the given
 endpoints, waits for its `ready SENSOR MODEL URI[ -> /dev/pts/N]` lines
-(CLI.md) and stops it with SIGTERM, as a service manager would. Its control
+and stops it with SIGTERM, as a service manager would. Its control
 API listens on a free loopback port (`control_url`, from its `ready control`
 line) unless the arguments say otherwise, so daemons started side by side
 never fight over the default port.
@@ -26,7 +26,7 @@ from emulator.scene import load_scene
 
 
 class ServeError(RuntimeError):
-    """The daemon did not come up as CLI.md promises."""
+    """The daemon did not come up: it exited or printed no `ready` line in time."""
 
 
 @dataclass(frozen=True)

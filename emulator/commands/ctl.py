@@ -1,4 +1,4 @@
-"""`lrf-emulator ctl ...`: change a running daemon from a terminal (CONTROL_API.md).
+"""`lrf-emulator ctl ...`: change a running daemon from a terminal (docs/control.md).
 
     ctl state                              the clock, densities, plumes, poses, clients (JSON)
     ctl set region NAME density D          a smoke region holds D from now on

@@ -1,4 +1,4 @@
-"""`lrf-emulator plot SCENE --sensor NAME --start T0 --end T1 --out FILE.png` (CLI.md),
+"""`lrf-emulator plot SCENE --sensor NAME --start T0 --end T1 --out FILE.png`,
 and `lrf-emulator plot SCENE --map [--time T] [--sensor NAME] --out FILE.png`.
 
 A waterfall of the sensor's scans (time down, beam angle across, darker =

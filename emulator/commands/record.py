@@ -1,4 +1,4 @@
-"""`lrf-emulator record SCENE --sensor NAME --start T0 --end T1 --out FILE [--format text|mcap]` (CLI.md).
+"""`lrf-emulator record SCENE --sensor NAME --start T0 --end T1 --out FILE [--format text|mcap]`.
 
 Writes one log line per scan (emulator/recording/textlog.py), or with
 `--format mcap` an MCAP file with the scene's Foxglove channels

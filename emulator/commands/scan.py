@@ -1,4 +1,4 @@
-"""`lrf-emulator scan SCENE --sensor NAME [--time T] [--seed N] [--model PRESET]`: one scan as JSON (CLI.md).
+"""`lrf-emulator scan SCENE --sensor NAME [--time T] [--seed N] [--model PRESET]`: one scan as JSON.
 
 The URG-04LX gives all 769 steps (0..768; steps outside 44..725 carry the
 sensor's out-of-area value); the LMS200 the scan its scene options select

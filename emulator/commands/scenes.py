@@ -1,4 +1,4 @@
-"""`lrf-emulator scenes` (CLI.md): the bundled scenes, one line each with its description."""
+"""`lrf-emulator scenes`: the bundled scenes, one line each with its description."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
-"""`lrf-emulator serve`: the daemon (CLI.md).
+"""`lrf-emulator serve`: the daemon.
 
 Prints `ready SENSOR MODEL URI[ -> /dev/pts/N]` as each endpoint serves, then
-`ready control http://HOST:PORT` when the control API (CONTROL_API.md) listens,
+`ready control http://HOST:PORT` when the control API (docs/control.md) listens,
 `ready foxglove ws://HOST:PORT` and `ready view http://HOST:PORT` for Foxglove
 live and the browser view (emulator/view); `--mcap FILE` records the session.
 SIGINT / SIGTERM / SIGHUP / SIGQUIT stop it (symlinks removed, exit 0; during

@@ -1,4 +1,4 @@
-"""The control API of a running daemon (CONTROL_API.md), its event log and `ctl`.
+"""The control API of a running daemon (docs/control.md), its event log and `ctl`.
 
 Owns the HTTP/WebSocket server on the daemon's loop (`server.py`), the
 translation of request bodies and event-log lines into live events by the

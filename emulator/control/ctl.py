@@ -1,4 +1,4 @@
-"""`lrf-emulator ctl`: a terminal client of the control API (CONTROL_API.md).
+"""`lrf-emulator ctl`: a terminal client of the control API (docs/control.md).
 
 Each subcommand is one request; the answer is printed as JSON (`state`) or
 as one line saying what was applied. `watch SENSOR` prints a line per scan

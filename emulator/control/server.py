@@ -1,4 +1,4 @@
-"""The control API's HTTP and WebSocket server (CONTROL_API.md), on the daemon's asyncio loop.
+"""The control API's HTTP and WebSocket server (docs/control.md), on the daemon's asyncio loop.
 
 Every answer is JSON. Client mistakes get a 4xx with `{"error", "key"}` in
 the scene loader's words (404 unknown name or path, 400 a refused value or

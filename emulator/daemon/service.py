@@ -55,7 +55,7 @@ from protocols.device import Device, Output
 from protocols.lms2xx import Lms200Device
 from protocols.scip import UrgDevice
 
-# the SensorSpec options each protocol device takes (SCENE_FORMAT.md)
+# the SensorSpec options each protocol device takes (docs/scene-format.md)
 DEVICE_OPTIONS: dict[str, tuple[str, ...]] = {
     "urg-04lx": ("serial", "boot_protocol", "timing"),
     "lms200": ("baud", "type_string", "angle_deg", "resolution_deg", "units", "firmware_profile"),

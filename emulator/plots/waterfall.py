@@ -6,7 +6,7 @@ waterfall (time down, angle across as seen from behind the sensor, darker =
 shorter, red = error code) with the smoke level over time beside it.
 
 Camera saturation is shown for scenes with smoke regions, from the mean
-density along the beams by `s = s0·exp(−c·density)` (SMOKE_MODEL.md §3). That
+density along the beams by `s = s0·exp(−c·density)` (docs/smoke-model.md §3). That
 curve is an assumption fitted to the paper's single published point
 (density 0.0028 ↔ saturation 0.14); every figure says so.
 
@@ -45,7 +45,7 @@ NO_RETURN_RGB = (0.86, 0.92, 1.0)
 
 
 def saturation(density: np.ndarray | float) -> np.ndarray:
-    """Assumed camera saturation of the reference target seen through `density` (SMOKE_MODEL.md §3)."""
+    """Assumed camera saturation of the reference target seen through `density` (docs/smoke-model.md §3)."""
     return SATURATION_CLEAR * np.exp(-SATURATION_PER_DENSITY * np.asarray(density, dtype=float))
 
 

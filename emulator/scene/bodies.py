@@ -1,4 +1,4 @@
-"""Bodies (SCENE_FORMAT.md "Bodies"): rigid frames that move, and their poses as pure functions of t.
+"""Bodies (docs/scene-format.md, "Bodies"): rigid frames that move, and their poses as pure functions of t.
 
 A body's pose at any instant comes from its trajectory alone (plus, for a live
 body, the pose events recorded so far), so a scan evaluates it directly for

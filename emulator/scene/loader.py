@@ -1,4 +1,4 @@
-"""Load a scene file (SCENE_FORMAT.md) into the immutable dataclasses of `model.py`.
+"""Load a scene file (docs/scene-format.md) into the immutable dataclasses of `model.py`.
 
 Validation is strict so that a typo never silently becomes a default: unknown
 keys, wrong types (a boolean is not a number), NaN/inf, out-of-range values,
@@ -79,7 +79,7 @@ PLUME_KEYS = (
 )
 MATERIAL_KEYS = tuple(field.name for field in dataclasses.fields(Material))
 
-# Model options with the real device's defaults (SCENE_FORMAT.md; firmware_profile is ours).
+# Model options with the real device's defaults (docs/scene-format.md; firmware_profile is ours).
 URG_OPTION_KEYS = ("boot_protocol", "serial", "timing")
 LMS_OPTION_KEYS = ("baud", "angle_deg", "resolution_deg", "units", "type_string", "firmware_profile")
 OPTION_KEYS = {"urg-04lx": URG_OPTION_KEYS, "lms200": LMS_OPTION_KEYS}
@@ -218,7 +218,7 @@ MAX_EXTENT_M = 100_000.0  # every coordinate, length, speed (m, m/s) lies within
 MAX_PARTICLES_ALIVE = 20_000  # Σ over plumes of rate × lifetime (railway has 80; 10 000 cost 24 ms a scan)
 MAX_SCENE_ITEMS = 10_000  # objects + smoke regions + plumes
 MAX_MESH_TRIANGLES = 2_000_000  # triangles of every mesh file, counted once per use
-MAX_SENSORS = 256  # a fleet-sized scene: issue 16's moonshot serves 120 from one daemon
+MAX_SENSORS = 256  # a fleet-sized scene: bench --section serve runs 120 sensors in one daemon
 MAX_ENDPOINTS_PER_SENSOR = 8
 
 

@@ -1,4 +1,4 @@
-"""The parsed scene: immutable, validated data (SCENE_FORMAT.md).
+"""The parsed scene: immutable, validated data (docs/scene-format.md).
 
 Everything here is plain data. Loading and validation live in `loader.py`;
 geometry (meshes in the world frame) in `geometry.py`; plume particles as
@@ -161,7 +161,7 @@ class Plume:
 @dataclass(frozen=True)
 class SensorSpec:
     """A sensor in the scene. `options` holds the validated model options
-    (SCENE_FORMAT.md), every one filled with the real device's default."""
+    (docs/scene-format.md), every one filled with the real device's default."""
 
     name: str
     model: str  # "urg-04lx" | "lms200"

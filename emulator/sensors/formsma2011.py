@@ -1,4 +1,4 @@
-"""Preset `formsma2011`: the paper's rule, exactly (SMOKE_MODEL.md §2). Noiseless.
+"""Preset `formsma2011`: the paper's rule, exactly (docs/smoke-model.md §2). Noiseless.
 
 URG-04LX: a beam whose smoke-region optical path before the solid surface
 (or before 5.6 m when nothing solid is in reach: the beam dies in the smoke)
@@ -8,7 +8,7 @@ intensity); else with nothing solid within 5.6 m it returns 0; otherwise the ran
 in mm (a range that rounds below 20 mm returns 19, non-measurable distance).
 
 The paper's text (§4.3) returns "error value zero" when the penetration
-power is used up; SMOKE_MODEL.md §2 asks for 1. We keep 1 on purpose: 0 is
+power is used up; docs/smoke-model.md §2 asks for 1. We keep 1 on purpose: 0 is
 the URG's code for "nothing within range", which outdoors is most beams, so
 with 0 a smoke-blanked beam could not be told from open sky by any consumer
 (drivers, plots, the validation report); 1 is the device's own code for this

@@ -1,4 +1,4 @@
-"""Where a sensor's beams start and point at each beam's own instant (SCENE_FORMAT.md "Bodies").
+"""Where a sensor's beams start and point at each beam's own instant (docs/scene-format.md, "Bodies").
 
 A sensor without a body, or on a body without a trajectory, stands still: its
 beams are computed once (`fixed_rays`), exactly as a fixed sensor's. A sensor

@@ -1,4 +1,4 @@
-"""A scan as the JSON of `lrf-emulator scan` (CLI.md), shared by the command and the control API."""
+"""A scan as the JSON of `lrf-emulator scan`, shared by the command and the control API."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Measurements of the `physical` model against SMOKE_MODEL.md §4's validation targets.
+"""Measurements of the `physical` model against docs/smoke-model.md §5's validation targets.
 
 Each function measures one behaviour from device values only (what a driver
 would see), so the tests and docs/validation.md share the numbers.
@@ -308,7 +308,7 @@ def _render_section(figures_dir: Path) -> str:
             "## The `physical` model (beyond the paper)",
             "",
             "How the `physical` preset (docs/physical-model.md) meets the validation targets of",
-            "SMOKE_MODEL.md §4. All numbers are measured from device values with noise and",
+            "docs/smoke-model.md §5. All numbers are measured from device values with noise and",
             "density fluctuations on; `tests/emulator/test_physical_*.py` assert them.",
             "",
             "![URG error rate vs optical path](figures/physical_s_curve.png)",

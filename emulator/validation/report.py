@@ -149,7 +149,7 @@ paper target, the room filled by one smoke region whose density follows the
 fog-machine run (keyframes {', '.join(f'{t:g} s: {d:g}' for t, d in fog.density.keyframes)}).
 Preset `{scene.model}`: a beam fails (error code 1) when density × chord exceeds
 the penetration power 0.007 d·m (eq. 1) before it reaches the target.
-Saturation is not simulated: it is the assumed curve of SMOKE_MODEL.md §3,
+Saturation is not simulated: it is the assumed curve of docs/smoke-model.md §3,
 s = 0.8·exp(−622·density), fitted to the paper's one published point
 (0.0028 ↔ 0.14). **Every saturation shown here is that assumption.**
 

@@ -1,4 +1,4 @@
-"""The view's way to change the world: the daemon's own control API over HTTP (CONTROL_API.md).
+"""The view's way to change the world: the daemon's own control API over HTTP (docs/control.md).
 
 The browser view's sliders, toggles and gizmo call these from viser's
 callback threads, never from the daemon's loop; the loop answers them as it

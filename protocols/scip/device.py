@@ -1,8 +1,8 @@
 """`UrgDevice`: a Hokuyo URG-04LX speaking SCIP 2.0 (optionally booting in 1.1).
 
 A sans-I/O state machine: bytes and simulated time in, whole messages out.
-Facts: ../shared/protocols/SCIP_URG04LX.md; choices where they are silent:
-docs/scip.md.
+Facts: Hokuyo's SCIP 2.0 specification and a real unit's capture
+(tests/protocols/data/urg04lx-real-session.txt); choices where they are silent: docs/scip.md.
 """
 
 from __future__ import annotations

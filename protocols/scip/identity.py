@@ -1,5 +1,5 @@
 """The URG-04LX's identity: VV, PP and II bodies, byte-exact to a real unit
-(firmware 3.1.04, ../shared/reference/urg04lx-real-session.txt).
+(firmware 3.1.04, tests/protocols/data/urg04lx-real-session.txt).
 
 Each body line is `KEY:VALUE;S` where S sums only the text before the `;`.
 """

@@ -1,4 +1,4 @@
-"""Bodies (SCENE_FORMAT.md "Bodies"): the format's rules, poses as functions of t, moving sensors and
+"""Bodies (docs/scene-format.md, "Bodies"): the format's rules, poses as functions of t, moving sensors and
 solids, each beam cast at the instant its step is measured, and the ground truth beside a scan."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The control API against the real `serve` process (CONTROL_API.md).
+"""The control API against the real `serve` process (docs/control.md).
 
 Answers are JSON with the scene loader's words; nothing a client sends gets a
 500; a plume switched on shows up in the LMS200's scans; the clock pauses;

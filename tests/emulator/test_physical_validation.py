@@ -1,4 +1,4 @@
-"""Validation targets 2–7 of SMOKE_MODEL.md §4 for the `physical` model (target 1: test_physical_reduction.py).
+"""Validation targets 2–7 of docs/smoke-model.md §5 for the `physical` model (target 1: test_physical_reduction.py).
 
 Every figure is measured from device values, with noise and fluctuations on.
 """

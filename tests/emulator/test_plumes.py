@@ -1,4 +1,4 @@
-"""Plume particles: analytic in time, deterministic from the seed (SCENE_FORMAT.md)."""
+"""Plume particles: analytic in time, deterministic from the seed (docs/scene-format.md)."""
 
 from __future__ import annotations
 

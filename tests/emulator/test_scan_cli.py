@@ -1,4 +1,4 @@
-"""`lrf-emulator scan` through the real command line (CLI.md)."""
+"""`lrf-emulator scan` through the real command line."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Property: with preset formsma2011 every beam's value is the paper's rule (SMOKE_MODEL.md §2).
+"""Property: with preset formsma2011 every beam's value is the paper's rule (docs/smoke-model.md §2).
 
 The reference below is deliberately naive and independent of the emulator:
 scalar per-beam loops, its own rotations (roll about x, then pitch about y,

@@ -1,6 +1,6 @@
-"""The LMS200's ACK within 60 ms (LMS2XX_LMS200.md) while it streams at 9600, against
-the real `serve`, also with two busy processes competing for the CPU (issue 15:
-under load it once took 100-1300 ms, part of it queued behind stream output)."""
+"""The LMS200's ACK within 60 ms (docs/lms200.md) while it streams at 9600, against
+the real `serve`, also with two busy processes competing for the CPU (under
+load it once took 100-1300 ms, part of it queued behind stream output)."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """The URG-04LX's real-unit timing on the wire, against the real `serve`: replies
 at the 100 ms command cycle, fresh GD scans, RS stamps, settings that outlive a
-connection, and `timing = "fast"` (SCIP_URG04LX.md, Timing)."""
+connection, and `timing = "fast"` (docs/scip.md, "Time")."""
 
 from __future__ import annotations
 

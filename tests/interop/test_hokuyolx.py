@@ -2,7 +2,7 @@
 
 hokuyolx is written for UST sensors: its default time sync sends `%ST` and
 `TM`, which a URG-04LX answers differently, so it is built with
-tsync=False, convert_time=False (SCIP_URG04LX.md). Everything else runs as
+tsync=False, convert_time=False (docs/interop.md). Everything else runs as
 shipped: PP to learn the sensor, BM, GD, MD with remaining counts, QT.
 """
 

@@ -120,7 +120,7 @@ def test_means_in_a_32_m_field_keep_the_distances_and_drop_the_flags():
 
 
 def test_a_sub_range_too_long_for_one_telegram_comes_as_partial_scans():
-    """Issue 17: 37 01 00 91 01 at 100°/0.25° raised and sent nothing."""
+    """A regression: 37 01 00 91 01 at 100°/0.25° raised and sent nothing."""
     device, _ = configured(0x00, angle_deg=100, resolution_deg=0.25)
     replies = ask(device, bytes.fromhex("37 01 00 91 01"), 2.0)
     assert replies[0] == ACK and len(replies) == 5

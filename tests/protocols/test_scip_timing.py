@@ -1,4 +1,4 @@
-"""The real unit's command cycle (SCIP_URG04LX.md, Timing): replies at the
+"""The real unit's command cycle (docs/scip.md, "Time"): replies at the
 100 ms cycle points, GD/GS with a revolution measured after the command,
 RS stamps, and the `fast` option. Simulated time only: no sleeping."""
 

@@ -1,4 +1,4 @@
-"""The `physical` preset (SMOKE_MODEL.md §4): one echo-power mechanism behind every smoke behaviour.
+"""The `physical` preset (docs/smoke-model.md §5): one echo-power mechanism behind every smoke behaviour.
 
 `preset` is the preset module the scene's `model = "physical"` selects
 (`urg_values[_at]`, `lms_values[_at]`); `beams` gathers each beam's smoke and

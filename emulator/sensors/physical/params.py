@@ -115,7 +115,7 @@ class PhysicalParams:
 
 DEFAULT_PARAMS = PhysicalParams()
 
-# Clear-air range error (datasheets, SMOKE_MODEL.md §3).
+# Clear-air range error (datasheets, docs/smoke-model.md §3).
 URG_ACCURACY_NEAR_M = 0.010  # ±10 mm below 1 m
 URG_ACCURACY_RELATIVE = 0.01  # ±1 % of the reading above 1 m
 URG_ACCURACY_COVERAGE_SIGMAS = 2.0  # we read "±" as a 95 % bound: sigma = figure / 2 (assumption)

@@ -1,4 +1,4 @@
-"""Preset `physical`: one echo-power mechanism behind every smoke behaviour (SMOKE_MODEL.md §4).
+"""Preset `physical`: one echo-power mechanism behind every smoke behaviour (docs/smoke-model.md §5).
 
 Extinction σ = density_to_extinction × density attenuates each echo twice
 (Beer–Lambert); a surface's echo ∝ reflectivity · cos^n / R² · T must reach a
