@@ -71,6 +71,34 @@ class LmsReceiver(ReceiverOptics):
 
 
 @dataclass(frozen=True)
+class PulsedReceiver(ReceiverOptics):
+    """A pulsed time-of-flight receiver that reports up to `max_echoes` returns per beam
+    (the multi-echo Hokuyos and SICKs; docs/physical-model.md §6 gives each number's source).
+
+    separation_m: two returns closer than this merge into one echo: the pulse's
+        length in range, c·pulse_width/2 (pulse_width_s is kept for the docs).
+    wavelength_nm: the laser's wavelength (datasheet; smoke extinction is taken as
+        grey, the same at every wavelength here).
+    intensity_reference: the intensity the unit reports for the reference target
+        (white paper at 2.5 m, normal incidence): intensity is linear in received power.
+    intensity_max: the largest intensity the unit reports (saturation).
+    fog_filter_m, fog_filter_gain: with the fog filter on, echoes nearer than
+        `fog_filter_m` must be `fog_filter_gain` times stronger than the threshold.
+    range_sigma_m: clear-air range noise (one standard deviation) of every echo.
+    """
+
+    max_echoes: int = 1
+    separation_m: float = 0.6
+    pulse_width_s: float = 4e-9
+    wavelength_nm: float = 905.0
+    intensity_reference: float = 6000.0
+    intensity_max: int = 65535
+    fog_filter_m: float = 0.0
+    fog_filter_gain: float = 1.0
+    range_sigma_m: float = 0.0
+
+
+@dataclass(frozen=True)
 class PhysicalParams:
     """Switches and constants. `exact()` gives the configuration that reduces to formsma2011."""
 
@@ -114,6 +142,43 @@ class PhysicalParams:
 
 
 DEFAULT_PARAMS = PhysicalParams()
+
+
+def _hokuyo(max_echoes: int, detection: tuple[float, float], range_sigma_m: float) -> PulsedReceiver:
+    return PulsedReceiver(
+        overlap_m=0.05, footprint_rad=np.radians(0.25), detection=detection, volume_gain=HOKUYO_VOLUME_GAIN,
+        max_echoes=max_echoes, separation_m=HOKUYO_SEPARATION_M, pulse_width_s=2.0 * HOKUYO_SEPARATION_M / SPEED_OF_LIGHT_M_S,
+        wavelength_nm=905.0, intensity_reference=6000.0, intensity_max=65535, range_sigma_m=range_sigma_m,
+    )
+
+
+def _sick(max_echoes: int, detection: tuple[float, float], footprint_rad: float, wavelength_nm: float, range_sigma_m: float,
+          fog_filter_m: float = 0.0) -> PulsedReceiver:
+    return PulsedReceiver(
+        overlap_m=0.05, footprint_rad=footprint_rad, detection=detection, volume_gain=SICK_VOLUME_GAIN,
+        max_echoes=max_echoes, separation_m=SICK_SEPARATION_M, pulse_width_s=2.0 * SICK_SEPARATION_M / SPEED_OF_LIGHT_M_S,
+        wavelength_nm=wavelength_nm, intensity_reference=200.0, intensity_max=255, range_sigma_m=range_sigma_m,
+        fog_filter_m=fog_filter_m, fog_filter_gain=FOG_FILTER_GAIN if fog_filter_m else 1.0,
+    )
+
+
+# The multi-echo receivers (docs/physical-model.md §6 gives each number's source).
+HOKUYO_SEPARATION_M = 0.6  # assumption: a 4 ns pulse
+SICK_SEPARATION_M = 0.6  # assumption: a 4 ns pulse
+HOKUYO_VOLUME_GAIN = 400.0  # assumption, as the LMS200's
+SICK_VOLUME_GAIN = 400.0  # assumption, as the LMS200's
+FOG_FILTER_GAIN = 2.6  # assumption: SICK's Dx1000 fog filter raises its minimum level from 500 to 1300 digits
+PULSED_RECEIVERS: dict[str, PulsedReceiver] = {
+    "utm-30lx": _hokuyo(1, (0.9, 30.0), 0.015),
+    "utm-30lx-ew": _hokuyo(3, (0.9, 30.0), 0.015),
+    "ust-10lx": _hokuyo(3, (0.9, 10.0), 0.020),
+    "ust-20lx": _hokuyo(3, (0.9, 20.0), 0.020),
+    "tim561": _sick(1, (0.1, 8.0), np.radians(0.8), 850.0, 0.020),
+    "tim571": _sick(1, (0.1, 8.0), np.radians(0.8), 850.0, 0.020),
+    "tim781": _sick(1, (0.1, 8.0), np.radians(0.8), 850.0, 0.020),
+    "lms111": _sick(2, (0.1, 18.0), np.radians(0.8), 905.0, 0.012),
+    "lms511": _sick(5, (0.1, 40.0), np.radians(0.27), 905.0, 0.012, fog_filter_m=16.0),
+}
 
 # Clear-air range error (datasheets, docs/smoke-model.md §3).
 URG_ACCURACY_NEAR_M = 0.010  # ±10 mm below 1 m

@@ -31,7 +31,9 @@ from emulator.sensors.physical.beams import (
     BeamPhysics,
     Instants,
     SmokeEchoes,
+    PUFFS_PER_PASS,
     beam_physics_at,
+    instant_passes,
 )
 from emulator.sensors.physical.echo import (
     lms_first_echo,
@@ -112,21 +114,9 @@ def lms_values_at(
     return np.where(seen, values, lms200.field_code(lms200.NO_ECHO, field_bits)).reshape(instants.count, -1)
 
 
-PUFFS_PER_PASS = 10_000  # the puffs of the instants computed in one pass, together (at least one instant a pass)
-
-
 def _passes(beams: Sequence[Beams]) -> list[slice]:
-    """The instants computed together, consecutive: all of them unless their puffs together pass
-    PUFFS_PER_PASS. A pass's arrays grow with its pairs and grid points, and past a few million they
-    cost more per scan than smaller passes (railway with 10 000 live particles, `physical` URG-04LX:
-    38 ms a scan in passes of 8 instants, 23 ms one at a time; with 500 particles 8 at a time is
-    fastest). Each instant's values are those of computing it alone, whatever the passes."""
-    if len(beams) == 1:
-        return [slice(0, 1)]
-    world = beams[0].world
-    most = max(len(world.particles_at(b.time_s)) for b in beams)  # kept by the world for the crossing
-    per_pass = max(1, PUFFS_PER_PASS // most) if most else len(beams)
-    return [slice(start, start + per_pass) for start in range(0, len(beams), per_pass)]
+    """The instants computed together (`instant_passes`, at most PUFFS_PER_PASS puffs a pass)."""
+    return instant_passes(beams, PUFFS_PER_PASS)
 
 
 def _physics(
