@@ -28,9 +28,10 @@ import dataclasses
 import math
 import os
 import sys
+import weakref
 from concurrent.futures import Executor, Future, ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Callable, Mapping, Protocol, Sequence
+from typing import Any, Callable, Mapping, Protocol, Sequence
 
 from emulator.daemon.clock import WallClock
 from emulator.daemon.scan_cache import (
@@ -45,6 +46,7 @@ from emulator.optics import World
 from emulator.scene.live import ClockChange, LiveEvent, LiveState, event_record
 from emulator.scene.endpoints import Address, PtyAddress, Rfc2217Address, plan_endpoints
 from emulator.scene.model import Scene, SensorSpec
+from emulator.scene.sick_models import MODELS as SICK_MODELS
 from emulator.sensors import create_sensor, urg04lx
 from emulator.sensors.scan import Scan
 from emulator.transport.pty import PtyEndpoint
@@ -52,6 +54,7 @@ from emulator.transport.rfc2217 import Rfc2217Endpoint
 from emulator.transport.tcp import IDLE_TIMEOUT_S, TcpEndpoint
 from emulator.transport.timer import LATE_THRESHOLDS_MS, PreciseTimer, shared_timer
 from protocols.device import Device, Output
+from protocols.cola import ColaDevice, ColaUnit, UnitModel
 from protocols.lms2xx import Lms200Device
 from protocols.scip import UrgDevice
 
@@ -59,7 +62,10 @@ from protocols.scip import UrgDevice
 DEVICE_OPTIONS: dict[str, tuple[str, ...]] = {
     "urg-04lx": ("serial", "boot_protocol", "timing"),
     "lms200": ("baud", "type_string", "angle_deg", "resolution_deg", "units", "firmware_profile"),
+    **{name: ("scan_frequency_hz", "resolution_deg", "serial", "fog_filter") for name in SICK_MODELS},
 }
+# One CoLa unit per sensor (scan source), shared by its endpoints: its settings outlive connections.
+_COLA_UNITS: weakref.WeakKeyDictionary[Any, ColaUnit] = weakref.WeakKeyDictionary()
 
 
 MAX_HELD_INPUT_BYTES = 65536  # client input waiting for a scan; beyond, it is discarded (counted)
@@ -95,7 +101,33 @@ def build_device(spec: SensorSpec, scans: Callable[..., Scan], *, phase_ms: int 
     options = {key: spec.options[key] for key in DEVICE_OPTIONS[spec.model] if key in spec.options}
     if spec.model == "urg-04lx":
         return UrgDevice(scans, **options, phase_ms=phase_ms)
+    if spec.model in SICK_MODELS:
+        return ColaDevice(scans, cola_unit(spec, scans))
     return Lms200Device(scans, **options)
+
+
+def cola_unit(spec: SensorSpec, scans: Callable[..., Scan]) -> ColaUnit:
+    """The CoLa unit behind a sensor's scan source, made at its first endpoint (powered on at 0 with the
+    scene's scan configuration)."""
+    unit = _COLA_UNITS.get(scans)
+    if unit is None:
+        unit = _COLA_UNITS[scans] = ColaUnit(unit_model(spec))
+    return unit
+
+
+def unit_model(spec: SensorSpec) -> UnitModel:
+    """What a CoLa device is told of its unit: the model's table row and the scene's options."""
+    sick = SICK_MODELS[spec.model]
+    options = spec.options
+    default = (int(round(float(options.get("scan_frequency_hz", sick.default[0] / 100)) * 100)),
+               int(round(float(options.get("resolution_deg", sick.default[1] / 1e4)) * 1e4)))
+    return UnitModel(
+        family=sick.family, device_ident=sick.device_ident, firmware_version=sick.firmware_version,
+        serial_number=str(options.get("serial", "12345678")),
+        start_ticks=int(round(sick.start_deg * 1e4)), stop_ticks=int(round(sick.stop_deg * 1e4)),
+        scan_configs=dict(sick.scan_configs), default=default, echoes=sick.echoes, distance_scale=sick.distance_scale,
+        fog_filter=bool(options.get("fog_filter", False)),
+    )
 
 
 @dataclass(frozen=True)

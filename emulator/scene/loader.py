@@ -36,6 +36,8 @@ from emulator.scene.endpoints import Address, EndpointClaims, parse_endpoint
 ENDPOINT_SYNTAX = '"pty:PATH", "tcp:HOST:PORT" or "rfc2217:HOST:PORT" with PORT 0..65535'
 from emulator.scene.geometry import MeshLoadError, load_mesh_file
 from emulator.scene.materials import BUILTIN_MATERIALS, DEFAULT_MATERIAL
+from emulator.scene.sick_models import ANGLE_TICKS_PER_DEG, FREQUENCY_TICKS_PER_HZ
+from emulator.scene.sick_models import MODELS as SICK_MODELS
 from emulator.scene.model import (
     Box,
     Cylinder,
@@ -57,7 +59,7 @@ BUNDLED_PACKAGE = "emulator.bundled_scenes"
 SCENE_SUFFIX = ".toml"
 
 SCENE_MODELS = ("formsma2011", "physical")
-SENSOR_MODELS = ("urg-04lx", "lms200")
+SENSOR_MODELS = ("urg-04lx", "lms200", *SICK_MODELS)
 SHAPE_KEYS = ("box", "sphere", "cylinder", "mesh")
 ORIGIN: Vec3 = (0.0, 0.0, 0.0)
 
@@ -82,8 +84,11 @@ MATERIAL_KEYS = tuple(field.name for field in dataclasses.fields(Material))
 # Model options with the real device's defaults (docs/scene-format.md; firmware_profile is ours).
 URG_OPTION_KEYS = ("boot_protocol", "serial", "timing")
 LMS_OPTION_KEYS = ("baud", "angle_deg", "resolution_deg", "units", "type_string", "firmware_profile")
-OPTION_KEYS = {"urg-04lx": URG_OPTION_KEYS, "lms200": LMS_OPTION_KEYS}
-SENSOR_KEYS = ("name", "model", "body", "position", "rotation_deg", "endpoints", *URG_OPTION_KEYS, *LMS_OPTION_KEYS)
+COLA_OPTION_KEYS = ("scan_frequency_hz", "resolution_deg", "serial", "fog_filter")
+OPTION_KEYS = {"urg-04lx": URG_OPTION_KEYS, "lms200": LMS_OPTION_KEYS, **{name: COLA_OPTION_KEYS for name in SICK_MODELS}}
+SENSOR_KEYS = tuple(dict.fromkeys(
+    ("name", "model", "body", "position", "rotation_deg", "endpoints", *URG_OPTION_KEYS, *LMS_OPTION_KEYS, *COLA_OPTION_KEYS)
+))
 URG_SERIAL_MAX_CHARS = 16
 LMS_TYPE_STRING_CHARS = 21
 LMS_BAUDS = (9600, 19200, 38400, 500000)
@@ -657,6 +662,33 @@ def _lms_options(table: _Table) -> dict[str, Any]:
     }
 
 
+def _option_of(key: str, model: str) -> str | None:
+    """The model `key` is an option of, when it is not one of `model`'s (None: it is, or no model's)."""
+    if key in OPTION_KEYS[model]:
+        return None
+    return next((other for other, keys in OPTION_KEYS.items() if key in keys), None)
+
+
+def _cola_options(table: _Table, model: str) -> dict[str, Any]:
+    """A CoLa SICK's power-on scan configuration (one its datasheet offers), serial number, fog filter."""
+    sick = SICK_MODELS[model]
+    default_hz, default_res = sick.default[0] / FREQUENCY_TICKS_PER_HZ, sick.default[1] / ANGLE_TICKS_PER_DEG
+    frequencies = tuple(ticks / FREQUENCY_TICKS_PER_HZ for ticks in sick.scan_configs)
+    frequency_hz = table.number_choice("scan_frequency_hz", default_hz, frequencies)
+    offered = sick.scan_configs[int(round(frequency_hz * FREQUENCY_TICKS_PER_HZ))]
+    resolution_deg = table.number_choice(
+        "resolution_deg", default_res if sick.offers(int(round(frequency_hz * 100)), sick.default[1]) else offered[0] / ANGLE_TICKS_PER_DEG,
+        tuple(ticks / ANGLE_TICKS_PER_DEG for ticks in offered),
+    )
+    serial = table.ascii_text("serial", "12345678", max_chars=8)
+    if not serial.isdigit():
+        raise table.place.key("serial").error(f"must be up to 8 decimal digits, got {_show(serial)}")
+    fog_filter = table.raw("fog_filter", False)
+    if not isinstance(fog_filter, bool) or (fog_filter and sick.family != "LMS5xx"):
+        raise table.place.key("fog_filter").error(f"must be true or false (true only on an LMS5xx), got {_show(fog_filter)}")
+    return {"scan_frequency_hz": frequency_hz, "resolution_deg": resolution_deg, "serial": serial, "fog_filter": fog_filter}
+
+
 def _sensors(tables: list[_Table], bodies: tuple[Body, ...]) -> tuple[SensorSpec, ...]:
     if len(tables) > MAX_SENSORS:
         raise tables[MAX_SENSORS].place.error(f"{len(tables)} sensors; a scene may have at most {MAX_SENSORS}")
@@ -666,11 +698,10 @@ def _sensors(tables: list[_Table], bodies: tuple[Body, ...]) -> tuple[SensorSpec
     for table in tables:
         name = table.name(seen)
         model = table.string("model", choices=SENSOR_MODELS)
-        other_model = next(other for other in SENSOR_MODELS if other != model)
-        foreign = next((key for key in OPTION_KEYS[other_model] if key in table), None)
+        foreign = next((key for key in SENSOR_KEYS if key in table and _option_of(key, model)), None)
         if foreign:
-            raise table.place.key(foreign).error(f"is an option of {other_model}, not of {model}")
-        options = _urg_options(table) if model == "urg-04lx" else _lms_options(table)
+            raise table.place.key(foreign).error(f"is an option of {_option_of(foreign, model)}, not of {model}")
+        options = _urg_options(table) if model == "urg-04lx" else _lms_options(table) if model == "lms200" else _cola_options(table, model)
         endpoints = _endpoints(table, claims, name)
         body = _body_of(table, bodies)
         sensors.append(SensorSpec(name, model, table.pose(), endpoints, MappingProxyType(options), body))

@@ -7,14 +7,16 @@ import numpy as np
 from emulator.errors import UserError
 from emulator.optics import World
 from emulator.scene.model import Scene
-from emulator.sensors import lms200, urg04lx
+from emulator.scene import sick_models
+from emulator.sensors import lms200, sick_cola, urg04lx
 from emulator.sensors.lms200 import LmsSensor
+from emulator.sensors.sick_cola import ColaSensor
 from emulator.sensors.scan import Scan
 from emulator.sensors.urg04lx import UrgSensor
 
-Sensor = UrgSensor | LmsSensor
+Sensor = UrgSensor | LmsSensor | ColaSensor
 
-__all__ = ["LmsSensor", "Scan", "Sensor", "UrgSensor", "beam_times_s", "create_sensor", "ranges_m"]
+__all__ = ["ColaSensor", "LmsSensor", "Scan", "Sensor", "UrgSensor", "beam_times_s", "create_sensor", "ranges_m"]
 
 
 def create_sensor(scene: Scene, name: str, world: World | None = None) -> Sensor:
@@ -28,7 +30,10 @@ def create_sensor(scene: Scene, name: str, world: World | None = None) -> Sensor
         return UrgSensor(scene, spec, world)
     if spec.model == lms200.MODEL:
         return LmsSensor(scene, spec, world)
-    raise UserError(f"sensor {name!r}: unknown model {spec.model!r} (known: {urg04lx.MODEL}, {lms200.MODEL})")
+    if spec.model in sick_models.MODELS:
+        return ColaSensor(scene, spec, world)
+    known = ", ".join((urg04lx.MODEL, lms200.MODEL, *sick_models.NAMES))
+    raise UserError(f"sensor {name!r}: unknown model {spec.model!r} (known: {known})")
 
 
 def beam_times_s(scan: Scan) -> np.ndarray:
@@ -37,6 +42,9 @@ def beam_times_s(scan: Scan) -> np.ndarray:
         return scan.time_s + urg04lx.angle_offsets_s(scan.angles_rad)
     if scan.model == lms200.MODEL:
         return scan.time_s + lms200.angle_offsets_s(scan.angles_rad)
+    if scan.model in sick_models.MODELS:  # at the model's power-on scan frequency
+        frequency_ticks = sick_models.MODELS[scan.model].default[0]
+        return scan.time_s + sick_cola.angle_offsets_s(scan.model, scan.angles_rad, 100.0 / frequency_ticks)
     raise ValueError(f"unknown sensor model {scan.model!r}")
 
 
@@ -46,4 +54,6 @@ def ranges_m(scan: Scan) -> np.ndarray:
         return urg04lx.ranges_m(scan.values)
     if scan.model == lms200.MODEL:
         return lms200.ranges_m(scan.values, scan.unit)
+    if scan.model in sick_models.MODELS:
+        return sick_cola.ranges_m(scan.model, scan.values)
     raise ValueError(f"unknown sensor model {scan.model!r}")

@@ -1,0 +1,171 @@
+"""The CoLa SICKs (TiM5xx/TiM7xx, LMS1xx, LMS5xx): beam geometry, mirror timing, echoes and RSSI.
+
+Device angles run from the model's start (-45° or -5°) to its stop (225° or
+185°), 90° straight ahead: the sensor-frame angle is the device angle − 90°.
+The mirror turns once per scan, counter-clockwise; a scan completes (its
+time) when it reaches the stop angle, so the beam at device angle a was
+measured (stop − a) / 360° of a period earlier. Each beam's echoes are
+distance counts on the wire (mm, or 2 mm on the LMS5xx), nearest first, 0
+never: a beam without an echo has none in the list (-1). The models' figures
+come from scene.sick_models (docs/cola.md cites them).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from emulator.optics import BeamHits, PreparedBeams, World
+from emulator.scene.model import Scene, SensorSpec
+from emulator.scene.sick_models import ANGLE_TICKS_PER_DEG, FREQUENCY_TICKS_PER_HZ, MODELS, SickModel
+from emulator.sensors.mount import SensorMount, cast_moving
+from emulator.sensors.response import Beams, response_model, values_at_instants
+from emulator.sensors.scan import Scan, simulated_instant
+
+# The single-echo presets give LMS-style values in mm with error codes at the top of a field this
+# wide; 17 bits (131 m) hold every model's range, so codes never collide with distances.
+FIELD_BITS = 17
+FIELD_CODES_FROM = (1 << FIELD_BITS) - 9
+RSSI_MAX = 0xFFFF
+
+
+def device_angles_deg(model: SickModel, resolution_ticks: int) -> np.ndarray:
+    """The field's device angles at a resolution: 811 from -45° to 225° at 0.3333° (a 1/3° grid)."""
+    count = model.beam_count(resolution_ticks)
+    return np.linspace(model.start_deg, model.stop_deg, count)
+
+
+def beam_offsets_s(model: SickModel, device_angles: np.ndarray, period_s: float) -> np.ndarray:
+    """When each beam is measured relative to the scan's time (≤ 0): the mirror reaches the stop angle last."""
+    offsets = -(model.stop_deg - np.asarray(device_angles, dtype=float)) / 360.0 * period_s
+    offsets.flags.writeable = False
+    return offsets
+
+
+def configured_request(options: Mapping[str, Any]) -> dict[str, Any]:
+    """The `scan` keywords for the scan configuration the scene's options select."""
+    return {
+        "frequency_ticks": int(round(float(options["scan_frequency_hz"]) * FREQUENCY_TICKS_PER_HZ)),
+        "resolution_ticks": int(round(float(options["resolution_deg"]) * ANGLE_TICKS_PER_DEG)),
+        "fog_filter": bool(options.get("fog_filter", False)),
+    }
+
+
+@dataclass(frozen=True)
+class _Window:
+    angles_rad: np.ndarray
+    offsets_s: np.ndarray
+    prepared: PreparedBeams | None
+
+
+class ColaSensor:
+    """A simulated CoLa SICK: `scan(time_s, frequency_ticks=, resolution_ticks=, fog_filter=)`."""
+
+    def __init__(self, scene: Scene, spec: SensorSpec, world: World) -> None:
+        self.scene, self.spec, self.world = scene, spec, world
+        self.name = spec.name
+        self.model = spec.model
+        self.sick = MODELS[spec.model]
+        self._response = response_model(scene.model)
+        self.mount = SensorMount(scene, spec, world.bodies)
+        self._fixed_spec = self.mount.fixed_spec
+        self._windows: dict[tuple[int, int], _Window] = {}
+
+    @property
+    def period_s(self) -> float:
+        return self.configured_period_s
+
+    def _window(self, frequency_ticks: int, resolution_ticks: int) -> _Window:
+        key = (frequency_ticks, resolution_ticks)
+        if key not in self._windows:
+            device_angles = device_angles_deg(self.sick, resolution_ticks)
+            angles_rad = np.radians(device_angles - 90.0)
+            angles_rad.flags.writeable = False
+            prepared = None
+            if not self.mount.moving:
+                origins, directions = self.mount.fixed_rays(angles_rad)
+                prepared = self.world.prepare(origins, directions, self.sick.max_range_m)
+            offsets = beam_offsets_s(self.sick, device_angles, FREQUENCY_TICKS_PER_HZ / frequency_ticks)
+            self._windows[key] = _Window(angles_rad, offsets, prepared)
+        return self._windows[key]
+
+    def _casts(self, window: _Window, instants: list[float]) -> list[tuple[BeamHits, Beams]]:
+        prepared = window.prepared
+        if prepared is None:
+            return cast_moving(self.world, self.scene, self.spec, self.mount, window.angles_rad, window.offsets_s,
+                               instants, self.sick.max_range_m)
+        casts = []
+        for time_s in instants:
+            beam_times = time_s + window.offsets_s
+            hits = self.world.cast_prepared(prepared, time_s, beam_times)
+            beams = Beams(self.scene, self._fixed_spec, self.world, time_s, window.angles_rad, prepared.origins,
+                          prepared.directions, beam_times_s=beam_times if self.world.moving else None)
+            casts.append((hits, beams))
+        return casts
+
+    def scan(self, time_s: float, **request: Any) -> Scan:
+        return self.scans((time_s,), **request)[0]
+
+    def scans(
+        self, times_s: Sequence[float], *, frequency_ticks: int, resolution_ticks: int, fog_filter: bool = False
+    ) -> list[Scan]:
+        """The whole field at each of `times_s`: every echo (distance counts) and its 16-bit RSSI;
+        `values` is the first echo as DIST1 carries it (0: none)."""
+        if not self.sick.offers(frequency_ticks, resolution_ticks):
+            raise ValueError(f"{self.model} offers no scan at {frequency_ticks / 100:g} Hz, {resolution_ticks / 1e4:g}°")
+        window = self._window(frequency_ticks, resolution_ticks)
+        instants = [simulated_instant(t) for t in times_s]
+        casts = self._casts(window, instants)
+        if not casts:
+            return []
+        hits, beams = zip(*casts)
+        echoes, powers = self._echoes(hits, beams)
+        scans = []
+        for t, row, power in zip(times_s, echoes, powers):
+            first = np.where(row[:, 0] >= 0, row[:, 0], 0)
+            first_power = np.where(row[:, 0] >= 0, power[:, 0], 0)
+            scans.append(Scan(self.name, self.model, t, window.angles_rad, first, "mm", None, first_power, row, power))
+        return scans
+
+    def _echoes(self, hits: Sequence[BeamHits], beams: Sequence[Beams]) -> tuple[np.ndarray, np.ndarray]:
+        """Echo counts and RSSI (K, N, E) from the scene's preset: its single echo, in range, as echo 1;
+        its RSSI from the surface's reflectivity, incidence and range (1/R², full scale at the
+        reflectivity of white paper at 1 m)."""
+        sick = self.sick
+        millimetres = values_at_instants(self._response, "lms_values", hits, beams, "mm", field_bits=FIELD_BITS)
+        millimetres = millimetres.astype(np.int64)
+        min_mm, max_mm = sick.min_range_m * 1000.0, sick.max_range_m * 1000.0
+        seen = (millimetres < FIELD_CODES_FROM) & (millimetres >= min_mm) & (millimetres <= max_mm)
+        counts = np.rint(millimetres / sick.distance_scale).astype(np.int64)
+        reflectivity = np.stack([hit.reflectivity * hit.cos_incidence for hit in hits])
+        range_m = np.maximum(millimetres / 1000.0, 1.0)
+        rssi = np.clip(np.rint(RSSI_MAX * np.nan_to_num(reflectivity) / range_m**2), 1, RSSI_MAX).astype(np.int64)
+        shape = (*millimetres.shape, sick.echoes)
+        echoes = np.full(shape, -1, np.int64)
+        powers = np.full(shape, -1, np.int64)
+        echoes[..., 0] = np.where(seen, counts, -1)
+        powers[..., 0] = np.where(seen, rssi, -1)
+        return echoes, powers
+
+    def configured_scan(self, time_s: float) -> Scan:
+        """The scan the scene's options select (`configured_request`), at `time_s`."""
+        return self.scan(time_s, **configured_request(self.spec.options))
+
+    configured_phase_s = 0.0  # scans complete at k · period after power-on
+
+    @property
+    def configured_period_s(self) -> float:
+        return FREQUENCY_TICKS_PER_HZ / configured_request(self.spec.options)["frequency_ticks"]
+
+
+def angle_offsets_s(model_name: str, angles_rad: np.ndarray, period_s: float) -> np.ndarray:
+    """`beam_offsets_s` of a scan's sensor-frame angles."""
+    return beam_offsets_s(MODELS[model_name], np.degrees(np.asarray(angles_rad)) + 90.0, period_s)
+
+
+def ranges_m(model_name: str, values: np.ndarray) -> np.ndarray:
+    """Metres per distance count, NaN where the beam had no echo (0 on the wire, -1 in an echo list)."""
+    values = np.asarray(values)
+    return np.where(values > 0, values * MODELS[model_name].distance_scale / 1000.0, np.nan)

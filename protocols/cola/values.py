@@ -1,0 +1,224 @@
+"""CoLa argument values: typed scalars, strings and arrays, as CoLa-A text or CoLa-B bytes.
+
+CoLa-A writes integers in upper-case hex without leading zeros (signed ones
+as their two's complement: -45° = -450000 = FFF92230), floats as the eight
+hex digits of their IEEE 754 bits, and a string with a length as `LEN TEXT`
+(the length in hex). A host may also write decimals with a sign (`+2500`,
+`-450000`). CoLa-B writes every value big-endian at its width, and a string
+with a length as a u16 length and its bytes.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+
+from protocols.cola.framing import Dialect
+
+# kind → (struct code, signed)
+SCALARS = {"u8": ("B", False), "u16": ("H", False), "u32": ("I", False),
+           "i8": ("b", True), "i16": ("h", True), "i32": ("i", True)}
+_HEX_DIGITS = np.frombuffer(b"0123456789ABCDEF", np.uint8)
+
+
+class BadArguments(ValueError):
+    """A request's arguments do not parse (too few, not a number, out of range)."""
+
+
+@dataclass(frozen=True)
+class Value:
+    """One argument: `kind` is a scalar kind of SCALARS, "f32", "raw" (bytes written as they
+    are: "DIST1"), "flex" (a string with its length) or "u8[]"/"u16[]" (a numpy array)."""
+
+    kind: str
+    value: object
+
+
+def u8(value: int) -> Value:
+    return Value("u8", value)
+
+
+def u16(value: int) -> Value:
+    return Value("u16", value)
+
+
+def u32(value: int) -> Value:
+    return Value("u32", value)
+
+
+def i16(value: int) -> Value:
+    return Value("i16", value)
+
+
+def i32(value: int) -> Value:
+    return Value("i32", value)
+
+
+def f32(value: float) -> Value:
+    return Value("f32", value)
+
+
+def raw(text: str) -> Value:
+    return Value("raw", text.encode("ascii"))
+
+
+def flex(text: str) -> Value:
+    return Value("flex", text.encode("ascii"))
+
+
+def array(values: np.ndarray, kind: str) -> Value:
+    return Value(kind, values)
+
+
+def hex_tokens(values: np.ndarray) -> bytes:
+    """Non-negative integers as upper-case hex without leading zeros, each followed by a space
+    (vectorised: the digits of every value at once, then the significant ones kept)."""
+    values = np.asarray(values, dtype=np.uint64)
+    if values.size == 0:
+        return b""
+    width = max(1, (int(values.max()).bit_length() + 3) // 4)
+    shifts = np.arange(width - 1, -1, -1, dtype=np.uint64) * np.uint64(4)
+    nibbles = (values[:, None] >> shifts[None, :]) & np.uint64(0xF)
+    digits = (width - np.arange(width))[None, :] <= np.maximum(_digit_counts(values), 1)[:, None]
+    chars = np.empty((len(values), width + 1), np.uint8)
+    chars[:, :width] = _HEX_DIGITS[nibbles.astype(np.intp)]
+    chars[:, width] = ord(" ")
+    keep = np.ones((len(values), width + 1), bool)
+    keep[:, :width] = digits
+    return chars[keep].tobytes()
+
+
+def _digit_counts(values: np.ndarray) -> np.ndarray:
+    """Hex digits each value needs (0 for 0)."""
+    bits = np.zeros(len(values), np.int64)
+    remaining = values.copy()
+    for shift in (32, 16, 8, 4, 2, 1):  # a binary search of the bit length, all values at once
+        step = np.uint64(shift)
+        high = remaining >= (np.uint64(1) << step)
+        bits += np.where(high, shift, 0)
+        remaining = np.where(high, remaining >> step, remaining)
+    bits += (remaining > 0).astype(np.int64)
+    return (bits + 3) // 4
+
+
+def _ascii_scalar(kind: str, value: int) -> bytes:
+    code, signed = SCALARS[kind]
+    bits = struct.calcsize(code) * 8
+    if signed and value < 0:
+        value += 1 << bits
+    return f"{value:X}".encode("ascii")
+
+
+def encode(values: list[Value], dialect: Dialect) -> bytes:
+    """The arguments as they follow a command name (and its space) in a telegram."""
+    if dialect is Dialect.ASCII:
+        return _encode_ascii(values)
+    return b"".join(_binary(value) for value in values)
+
+
+def _encode_ascii(values: list[Value]) -> bytes:
+    parts = []
+    for value in values:
+        kind = value.kind
+        if kind in SCALARS:
+            parts.append(_ascii_scalar(kind, int(value.value)))
+        elif kind == "f32":
+            parts.append(f"{struct.unpack('>I', struct.pack('>f', float(value.value)))[0]:08X}".encode("ascii"))
+        elif kind == "raw":
+            parts.append(value.value)
+        elif kind == "flex":
+            parts.append(f"{len(value.value):X} ".encode("ascii") + value.value)
+        elif kind.endswith("[]"):
+            tokens = hex_tokens(value.value)
+            if tokens:
+                parts.append(tokens[:-1])
+            else:
+                continue
+        else:
+            raise ValueError(f"unknown value kind {kind!r}")
+    return b" ".join(parts)
+
+
+def _binary(value: Value) -> bytes:
+    kind = value.kind
+    if kind in SCALARS:
+        return struct.pack(">" + SCALARS[kind][0], int(value.value))
+    if kind == "f32":
+        return struct.pack(">f", float(value.value))
+    if kind == "raw":
+        return value.value
+    if kind == "flex":
+        return struct.pack(">H", len(value.value)) + value.value
+    if kind == "u8[]":
+        return np.asarray(value.value, dtype=np.uint8).tobytes()
+    if kind == "u16[]":
+        return np.asarray(value.value, dtype=">u2").tobytes()
+    raise ValueError(f"unknown value kind {kind!r}")
+
+
+def decode(arguments: bytes, kinds: tuple[str, ...], dialect: Dialect) -> list[object]:
+    """A request's arguments of the given scalar kinds (or "flex"); BadArguments if they do not parse."""
+    if dialect is Dialect.ASCII:
+        return _decode_ascii(arguments.split(), kinds)
+    return _decode_binary(arguments, kinds)
+
+
+def _decode_ascii(tokens: list[bytes], kinds: tuple[str, ...]) -> list[object]:
+    values: list[object] = []
+    position = 0
+    for kind in kinds:
+        if position >= len(tokens):
+            raise BadArguments(f"{len(kinds)} arguments expected")
+        token = tokens[position]
+        position += 1
+        if kind == "flex":
+            length = _ascii_number(token, "u16")
+            text = b" ".join(tokens[position:])[:length]
+            values.append(text.decode("ascii", "replace"))
+            position = len(tokens)
+            continue
+        values.append(_ascii_number(token, kind))
+    return values
+
+
+def _ascii_number(token: bytes, kind: str) -> int:
+    code, signed = SCALARS[kind]
+    bits = struct.calcsize(code) * 8
+    try:
+        if token[:1] in (b"+", b"-"):
+            value = int(token, 10)
+        else:
+            value = int(token, 16)
+            if signed and value >= 1 << (bits - 1) and len(token) * 4 >= bits:
+                value -= 1 << bits  # FFF92230: a negative i32 written as its two's complement
+    except ValueError:
+        raise BadArguments(f"not a number: {token[:20]!r}") from None
+    low, high = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)
+    if not low <= value <= high:
+        raise BadArguments(f"{value} does not fit a {kind}")
+    return value
+
+
+def _decode_binary(arguments: bytes, kinds: tuple[str, ...]) -> list[object]:
+    values: list[object] = []
+    offset = 0
+    for kind in kinds:
+        if kind == "flex":
+            if offset + 2 > len(arguments):
+                raise BadArguments("string length missing")
+            length = struct.unpack_from(">H", arguments, offset)[0]
+            offset += 2
+            if offset + length > len(arguments):
+                raise BadArguments("string shorter than its length")
+            values.append(arguments[offset:offset + length].decode("ascii", "replace"))
+            offset += length
+            continue
+        code = ">" + SCALARS[kind][0]
+        size = struct.calcsize(code)
+        if offset + size > len(arguments):
+            raise BadArguments(f"{len(kinds)} arguments expected")
+        values.append(struct.unpack_from(code, arguments, offset)[0])
+        offset += size
+    return values
