@@ -21,6 +21,8 @@ from emulator.optics import BeamHits, PreparedBeams, World
 from emulator.scene.model import Scene, SensorSpec
 from emulator.scene.sick_models import ANGLE_TICKS_PER_DEG, FREQUENCY_TICKS_PER_HZ, MODELS, SickModel
 from emulator.sensors.mount import SensorMount, cast_moving
+from emulator.sensors.physical.multi_echo import echo_lists_at, intensity_of
+from emulator.sensors.physical.params import DEFAULT_PARAMS, PULSED_RECEIVERS
 from emulator.sensors.response import Beams, response_model, values_at_instants
 from emulator.sensors.scan import Scan, simulated_instant
 
@@ -28,7 +30,7 @@ from emulator.sensors.scan import Scan, simulated_instant
 # wide; 17 bits (131 m) hold every model's range, so codes never collide with distances.
 FIELD_BITS = 17
 FIELD_CODES_FROM = (1 << FIELD_BITS) - 9
-RSSI_MAX = 0xFFFF
+REFERENCE_RANGE_M = 2.5  # the receivers' reference target: white paper at 2.5 m
 
 
 def device_angles_deg(model: SickModel, resolution_ticks: int) -> np.ndarray:
@@ -121,7 +123,7 @@ class ColaSensor:
         if not casts:
             return []
         hits, beams = zip(*casts)
-        echoes, powers = self._echoes(hits, beams)
+        echoes, powers = self._echoes(hits, beams, fog_filter)
         scans = []
         for t, row, power in zip(times_s, echoes, powers):
             first = np.where(row[:, 0] >= 0, row[:, 0], 0)
@@ -129,24 +131,31 @@ class ColaSensor:
             scans.append(Scan(self.name, self.model, t, window.angles_rad, first, "mm", None, first_power, row, power))
         return scans
 
-    def _echoes(self, hits: Sequence[BeamHits], beams: Sequence[Beams]) -> tuple[np.ndarray, np.ndarray]:
-        """Echo counts and RSSI (K, N, E) from the scene's preset: its single echo, in range, as echo 1;
-        its RSSI from the surface's reflectivity, incidence and range (1/R², full scale at the
-        reflectivity of white paper at 1 m)."""
-        sick = self.sick
+    def _echoes(self, hits: Sequence[BeamHits], beams: Sequence[Beams], fog_filter: bool) -> tuple[np.ndarray, np.ndarray]:
+        """Echo counts and intensities (K, N, E). Under `physical`: the multi-echo receiver's echo list
+        (its threshold, pulse separation, fog filter). Under another preset (`formsma2011`: the paper's
+        Sick rule, a plume in the beam is an obstacle): its single echo as echo 1, its intensity from the
+        surface's reflectivity, incidence and range on the receiver's scale."""
+        sick, receiver = self.sick, PULSED_RECEIVERS[self.model]
+        if self.scene.model == "physical":
+            lists = echo_lists_at(hits, beams, receiver, DEFAULT_PARAMS, fog_filter=fog_filter)
+            in_range = np.isfinite(lists.ranges_m) & (lists.ranges_m >= sick.min_range_m) & (lists.ranges_m <= sick.max_range_m)
+            counts = np.rint(np.where(in_range, lists.ranges_m, 0.0) * 1000.0 / sick.distance_scale).astype(np.int64)
+            echoes, powers = _nearest_first(in_range, counts, lists.intensities(receiver))
+            return echoes, powers
         millimetres = values_at_instants(self._response, "lms_values", hits, beams, "mm", field_bits=FIELD_BITS)
         millimetres = millimetres.astype(np.int64)
         min_mm, max_mm = sick.min_range_m * 1000.0, sick.max_range_m * 1000.0
         seen = (millimetres < FIELD_CODES_FROM) & (millimetres >= min_mm) & (millimetres <= max_mm)
         counts = np.rint(millimetres / sick.distance_scale).astype(np.int64)
         reflectivity = np.stack([hit.reflectivity * hit.cos_incidence for hit in hits])
-        range_m = np.maximum(millimetres / 1000.0, 1.0)
-        rssi = np.clip(np.rint(RSSI_MAX * np.nan_to_num(reflectivity) / range_m**2), 1, RSSI_MAX).astype(np.int64)
+        range_m = np.maximum(millimetres / 1000.0, 0.1)
+        power = np.nan_to_num(reflectivity) / (range_m / REFERENCE_RANGE_M) ** 2
         shape = (*millimetres.shape, sick.echoes)
         echoes = np.full(shape, -1, np.int64)
         powers = np.full(shape, -1, np.int64)
         echoes[..., 0] = np.where(seen, counts, -1)
-        powers[..., 0] = np.where(seen, rssi, -1)
+        powers[..., 0] = np.where(seen, intensity_of(power, receiver), -1)
         return echoes, powers
 
     def configured_scan(self, time_s: float) -> Scan:
@@ -158,6 +167,15 @@ class ColaSensor:
     @property
     def configured_period_s(self) -> float:
         return FREQUENCY_TICKS_PER_HZ / configured_request(self.spec.options)["frequency_ticks"]
+
+
+def _nearest_first(seen: np.ndarray, counts: np.ndarray, intensities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The echoes in the unit's range, nearest first, -1 after them (one out of range leaves no gap)."""
+    order = np.argsort(~seen, axis=-1, kind="stable")
+    kept = np.take_along_axis(seen, order, -1)
+    echoes = np.where(kept, np.take_along_axis(counts, order, -1), -1)
+    powers = np.where(kept, np.take_along_axis(intensities, order, -1), -1)
+    return echoes, powers
 
 
 def angle_offsets_s(model_name: str, angles_rad: np.ndarray, period_s: float) -> np.ndarray:

@@ -60,7 +60,8 @@ ECHO_FIRST, ECHO_ALL, ECHO_LAST = 0, 1, 2
 
 class ScanValues(Protocol):
     """The scan of the whole field at one resolution: `echoes` (N, E) distance counts nearest
-    first (-1: no such echo), `echo_intensities` (N, E) 16-bit RSSI (-1 likewise)."""
+    first (-1: no such echo), `echo_intensities` (N, E) the unit's RSSI (-1 likewise; an 8-bit
+    channel saturates at 255)."""
 
     echoes: np.ndarray
     echo_intensities: np.ndarray
@@ -503,7 +504,7 @@ class ColaDevice:
                 column = int(channel.content[4:]) - 1
                 rssi = intensities[first:last + 1, column]
                 channels.append(Channel(f"RSSI{column + 1}", 1.0, start_ticks, settings.resolution_ticks,
-                                        rssi if wide else rssi >> 8, wide))
+                                        rssi if wide else np.minimum(rssi, 0xFF), wide))
         period = unit.period_s
         first_beam_s = scan_time - period * (model.stop_ticks - model.start_ticks) / 3_600_000
         header = ScanHeader(
