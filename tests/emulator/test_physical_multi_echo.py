@@ -63,12 +63,12 @@ def test_returns_too_weak_alone_are_seen_once_merged_and_a_chain_merges_as_one()
     assert lists.powers[0, 0] == pytest.approx(0.012)
 
 
-def test_a_unit_with_fewer_slots_than_echoes_keeps_the_nearest_and_the_farthest():
-    lists = _lists([[1.0, 2.0, 3.0, 4.0, 5.0]], [[0.1] * 5])
-    np.testing.assert_array_equal(lists.ranges_m[0], [1.0, 2.0, 5.0])
+def test_a_unit_with_fewer_slots_than_echoes_keeps_the_first_it_receives():
+    lists = _lists([[5.0, 4.0, 3.0, 2.0, 1.0]], [[0.1] * 5])
+    np.testing.assert_array_equal(lists.ranges_m[0], [1.0, 2.0, 3.0])
     assert lists.count[0] == 3
-    one = _lists([[1.0, 2.0, 3.0]], [[0.1] * 3], receiver=dataclasses.replace(RX3, max_echoes=1))
-    np.testing.assert_array_equal(one.ranges_m[0], [3.0])  # with one slot, the farthest is both first and last
+    one = _lists([[2.0, 3.0, 1.0]], [[0.1] * 3], receiver=dataclasses.replace(RX3, max_echoes=1))
+    np.testing.assert_array_equal(one.ranges_m[0], [1.0])  # with one slot: the first echo (a TiM's DIST1)
 
 
 def test_the_fog_filter_drops_near_echoes_weaker_than_its_raised_threshold():

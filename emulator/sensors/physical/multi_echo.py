@@ -16,8 +16,8 @@ a beam's returns are
 Returns closer than `separation_m` merge into one echo (powers add, the range
 is their power-weighted mean). Echoes weaker than the threshold — raised by
 `fog_filter_gain` nearer than `fog_filter_m` when the fog filter is on — are
-not seen. A unit keeping E echoes reports the nearest E-1 and the farthest:
-the first echo is the nearest return, the last the farthest.
+not seen. A unit keeping E echoes reports the first E it receives, the
+nearest: the first echo is the nearest return, the last the farthest kept.
 Powers are in reference units (white paper at 2.5 m in clear air = 1);
 `intensities` puts them on the unit's scale.
 
@@ -198,7 +198,7 @@ def select_echoes(ranges_m: np.ndarray, powers: np.ndarray, threshold: float, re
                   *, fog_filter: bool = False) -> EchoLists:
     """The echo lists (N, E) of N beams' candidate returns (N, C) in any order (absent ones: range inf,
     power 0): returns closer than `separation_m` merge, those below the detection level are dropped,
-    and of the rest a unit keeping E echoes reports the nearest E-1 and the farthest."""
+    and of the rest a unit keeping E echoes reports the first E it receives (the nearest)."""
     n, candidates = ranges_m.shape
     order = np.argsort(np.where(powers > 0, ranges_m, np.inf), axis=1, kind="stable")
     ranges = np.take_along_axis(np.where(powers > 0, ranges_m, np.inf), order, 1)
@@ -223,15 +223,12 @@ def select_echoes(ranges_m: np.ndarray, powers: np.ndarray, threshold: float, re
 
 
 def _kept(ranges: np.ndarray, powers: np.ndarray, seen: np.ndarray, max_echoes: int) -> EchoLists:
-    """Pack each row's seen echoes (in range order) into E slots: the nearest E-1 and the farthest."""
+    """Pack each row's seen echoes (in range order) into E slots: the first E received, the nearest."""
     n = len(ranges)
-    count = seen.sum(axis=1)
     rank = np.cumsum(seen, axis=1) - 1
-    last = rank == (count - 1)[:, None]
-    kept = seen & ((rank < max_echoes - 1) | last)
-    slot = np.minimum(rank, max_echoes - 1)
+    kept = seen & (rank < max_echoes)
     out_ranges, out_powers = np.full((n, max_echoes), np.nan), np.zeros((n, max_echoes))
-    target = (np.arange(n)[:, None] * max_echoes + slot)[kept]
+    target = (np.arange(n)[:, None] * max_echoes + rank)[kept]
     out_ranges.ravel()[target] = ranges[kept]
     out_powers.ravel()[target] = powers[kept]
-    return EchoLists(out_ranges, out_powers, np.minimum(count, max_echoes))
+    return EchoLists(out_ranges, out_powers, np.minimum(seen.sum(axis=1), max_echoes))

@@ -153,31 +153,33 @@ def _hokuyo(max_echoes: int, detection: tuple[float, float], range_sigma_m: floa
 
 
 def _sick(max_echoes: int, detection: tuple[float, float], footprint_rad: float, wavelength_nm: float, range_sigma_m: float,
-          fog_filter_m: float = 0.0) -> PulsedReceiver:
+          fog_filter_m: float = 0.0, rssi: tuple[float, int] = (200.0, 255)) -> PulsedReceiver:
     return PulsedReceiver(
         overlap_m=0.05, footprint_rad=footprint_rad, detection=detection, volume_gain=SICK_VOLUME_GAIN,
         max_echoes=max_echoes, separation_m=SICK_SEPARATION_M, pulse_width_s=2.0 * SICK_SEPARATION_M / SPEED_OF_LIGHT_M_S,
-        wavelength_nm=wavelength_nm, intensity_reference=200.0, intensity_max=255, range_sigma_m=range_sigma_m,
+        wavelength_nm=wavelength_nm, intensity_reference=rssi[0], intensity_max=rssi[1], range_sigma_m=range_sigma_m,
         fog_filter_m=fog_filter_m, fog_filter_gain=FOG_FILTER_GAIN if fog_filter_m else 1.0,
     )
 
 
 # The multi-echo receivers (docs/physical-model.md §6 gives each number's source).
-HOKUYO_SEPARATION_M = 0.6  # assumption: a 4 ns pulse
-SICK_SEPARATION_M = 0.6  # assumption: a 4 ns pulse
-HOKUYO_VOLUME_GAIN = 400.0  # assumption, as the LMS200's
-SICK_VOLUME_GAIN = 400.0  # assumption, as the LMS200's
+HOKUYO_SEPARATION_M = 0.6  # assumption: a 4 ns pulse (Hokuyo publishes no pulse width)
+SICK_SEPARATION_M = 0.75  # c × 5 ns / 2: the TiM5xx's maximum pulse duration (datasheet), taken for every SICK
+HOKUYO_VOLUME_GAIN = 400.0  # assumption, the LMS200's: β·V = 0.04, a smoke lidar ratio of π / (0.04 ρ_ref) ≈ 87 sr
+SICK_VOLUME_GAIN = 400.0  # the same
 FOG_FILTER_GAIN = 2.6  # assumption: SICK's Dx1000 fog filter raises its minimum level from 500 to 1300 digits
+LMS1XX_DIVERGENCE_RAD = 0.015  # LMS1xx operating instructions: spot = distance × 0.015 rad + 8 mm
+LMS5XX_DIVERGENCE_RAD = 0.0046  # LMS5xx operating instructions, high resolution: distance × 0.0046 rad + 13 mm
 PULSED_RECEIVERS: dict[str, PulsedReceiver] = {
     "utm-30lx": _hokuyo(1, (0.9, 30.0), 0.015),
     "utm-30lx-ew": _hokuyo(3, (0.9, 30.0), 0.015),
     "ust-10lx": _hokuyo(3, (0.9, 10.0), 0.020),
     "ust-20lx": _hokuyo(3, (0.9, 20.0), 0.020),
-    "tim561": _sick(1, (0.1, 8.0), np.radians(0.8), 850.0, 0.020),
-    "tim571": _sick(1, (0.1, 8.0), np.radians(0.8), 850.0, 0.020),
-    "tim781": _sick(1, (0.1, 8.0), np.radians(0.8), 850.0, 0.020),
-    "lms111": _sick(2, (0.1, 18.0), np.radians(0.8), 905.0, 0.012),
-    "lms511": _sick(5, (0.1, 40.0), np.radians(0.27), 905.0, 0.012, fog_filter_m=16.0),
+    "tim561": _sick(1, (0.1, 8.0), LMS1XX_DIVERGENCE_RAD, 850.0, 0.020),
+    "tim571": _sick(1, (0.1, 8.0), LMS1XX_DIVERGENCE_RAD, 850.0, 0.020),
+    "tim781": _sick(1, (0.1, 8.0), LMS1XX_DIVERGENCE_RAD, 850.0, 0.020),
+    "lms111": _sick(2, (0.1, 18.0), LMS1XX_DIVERGENCE_RAD, 905.0, 0.012),
+    "lms511": _sick(5, (0.1, 40.0), LMS5XX_DIVERGENCE_RAD, 905.0, 0.012, fog_filter_m=16.0, rssi=(20000.0, 65535)),
 }
 
 # Clear-air range error (datasheets, docs/smoke-model.md §3).
