@@ -142,32 +142,49 @@ def smoke_returns(smoke: SmokeEchoes, receiver: PulsedReceiver, threshold: float
     among them); each run of samples at or above the detection level is a return, placed where the
     signal first reaches it (linear between samples) with the run's strongest sample as its power.
     """
-    rows, edges = smoke.edges_m.shape
-    if rows == 0:
-        return np.zeros((0, 0)), np.zeros((0, 0))
+    rows = len(smoke.amp)
+    # a pulse length holds at most the densest bin's energy per metre times its length (the cumulative is
+    # linear within bins): only rows where that reaches the threshold can return anything
+    densest = (smoke.amp / np.diff(smoke.edges_m, axis=1)).max(axis=1, initial=0.0)
+    strong = np.flatnonzero(densest * receiver.separation_m >= threshold * (1.0 - 1e-9))
+    if len(strong) == 0:
+        return np.full((rows, 0), np.inf), np.zeros((rows, 0))
+    ranges, powers = _strong_smoke_returns(smoke.amp[strong], smoke.edges_m[strong], smoke.fractions, receiver, threshold, fog_filter)
+    all_ranges, all_powers = np.full((rows, ranges.shape[1]), np.inf), np.zeros((rows, ranges.shape[1]))
+    all_ranges[strong], all_powers[strong] = ranges, powers
+    return all_ranges, all_powers
+
+
+def _strong_smoke_returns(amp: np.ndarray, edges_m: np.ndarray, fractions: np.ndarray, receiver: PulsedReceiver,
+                          threshold: float, fog_filter: bool) -> tuple[np.ndarray, np.ndarray]:
+    """`smoke_returns` of rows whose smoke may hold the threshold within a pulse length."""
+    rows, edges = edges_m.shape
     cumulative = np.zeros((rows, edges))
-    np.cumsum(smoke.amp, axis=1, out=cumulative[:, 1:])
-    start, length = smoke.edges_m[:, :1], smoke.edges_m[:, -1:] - smoke.edges_m[:, :1]
+    np.cumsum(amp, axis=1, out=cumulative[:, 1:])
+    length = edges_m[:, -1:] - edges_m[:, :1]
     reach = receiver.separation_m / length
-    behind = cumulative - _cumulative_at(cumulative, smoke.fractions, smoke.fractions - reach)  # windows ending at the points
-    ahead = _cumulative_at(cumulative, smoke.fractions, smoke.fractions + reach) - cumulative  # ... ending a pulse length on
-    points = np.concatenate([smoke.edges_m, smoke.edges_m + receiver.separation_m], axis=1)
+    at = _cumulative_at(cumulative, fractions, np.concatenate([fractions - reach, fractions + reach], axis=1))
+    at[:, :edges] -= cumulative
+    at[:, edges:] -= cumulative
+    at[:, :edges] *= -1.0  # the windows ending at the grid points, then those ending a pulse length on
+    points = np.concatenate([edges_m, edges_m + receiver.separation_m], axis=1)
     order = np.argsort(points, axis=1, kind="stable")
-    points = np.take_along_axis(points, order, 1)
-    signal = np.take_along_axis(np.concatenate([behind, ahead], axis=1), order, 1)
+    order += (np.arange(rows) * (2 * edges))[:, None]  # row-major flat positions: `take` beats 2-D indexing
+    points = points.take(order)
+    signal = at.take(order)
     level = detection_level(points, threshold, receiver, fog_filter)
     above = signal >= level
     starts = above.copy()
     starts[:, 1:] &= ~above[:, :-1]
-    most = int(starts.sum(axis=1).max())
+    run = np.cumsum(starts, axis=1)  # 1 + each sample's return while above
+    most = int(run[:, -1].max())
     if most == 0:
         return np.full((rows, 0), np.inf), np.zeros((rows, 0))
-    slots = np.arange(rows)[:, None] * most + np.cumsum(starts, axis=1) - 1  # each sample's return (while above)
-    powers = np.zeros(rows * most)
-    np.maximum.at(powers, slots[above], signal[above])
+    run[~above] = 0
+    powers = np.stack([np.where(run == j + 1, signal, 0.0).max(axis=1) for j in range(most)], axis=1)  # J returns, J small
     ranges = np.full(rows * most, np.inf)
-    ranges[slots[starts]] = _crossings(signal, level, points, starts)
-    return ranges.reshape(rows, most), powers.reshape(rows, most)
+    ranges[(np.arange(rows)[:, None] * most + run - 1)[starts]] = _crossings(signal, level, points, starts)
+    return ranges.reshape(rows, most), powers
 
 
 def _cumulative_at(cumulative: np.ndarray, fractions: np.ndarray, along: np.ndarray) -> np.ndarray:
@@ -175,11 +192,15 @@ def _cumulative_at(cumulative: np.ndarray, fractions: np.ndarray, along: np.ndar
     between them, at fractions `along` (R, P) (clipped to the extent)."""
     along = np.clip(along, 0.0, 1.0)
     bins = len(fractions) - 1
-    index = np.clip(np.searchsorted(fractions, along, side="right") - 1, 0, bins - 1)
-    low = np.take_along_axis(cumulative, index, 1)
-    high = np.take_along_axis(cumulative, index + 1, 1)
-    part = (along - fractions[index]) / (fractions[index + 1] - fractions[index])
-    return low + part * (high - low)
+    index = np.minimum(np.searchsorted(fractions, along, side="right") - 1, bins - 1)
+    part = (along - fractions.take(index)) / (fractions.take(index + 1) - fractions.take(index))
+    index += (np.arange(len(cumulative)) * cumulative.shape[1])[:, None]
+    low = cumulative.take(index)
+    high = cumulative.take(index + 1)
+    high -= low
+    high *= part
+    high += low
+    return high
 
 
 def _crossings(signal: np.ndarray, level: np.ndarray | float, points_m: np.ndarray, starts: np.ndarray) -> np.ndarray:
@@ -200,15 +221,32 @@ def select_echoes(ranges_m: np.ndarray, powers: np.ndarray, threshold: float, re
     power 0): returns closer than `separation_m` merge, those below the detection level are dropped,
     and of the rest a unit keeping E echoes reports the first E it receives (the nearest)."""
     n, candidates = ranges_m.shape
-    order = np.argsort(np.where(powers > 0, ranges_m, np.inf), axis=1, kind="stable")
-    ranges = np.take_along_axis(np.where(powers > 0, ranges_m, np.inf), order, 1)
-    amps = np.take_along_axis(np.where(powers > 0, powers, 0.0), order, 1)
+    present = powers > 0
+    several = np.flatnonzero(np.count_nonzero(present, axis=1) > 1)  # most beams have one return: nothing to sort
+    merged = np.full((n, candidates), np.inf)
+    power = np.zeros((n, candidates))
+    only = np.argmax(present, axis=1) + np.arange(0, n * candidates, candidates)
+    merged[:, 0] = np.where(present.ravel().take(only), ranges_m.ravel().take(only), np.inf)
+    power[:, 0] = np.where(present.ravel().take(only), powers.ravel().take(only), 0.0)
+    if len(several):
+        merged[several], power[several] = _merged(ranges_m[several], np.where(present[several], powers[several], 0.0), receiver.separation_m)
+    seen = (power > 0) & (power >= detection_level(merged, threshold, receiver, fog_filter))
+    return _kept(merged, power, seen, receiver.max_echoes)
+
+
+def _merged(ranges_m: np.ndarray, powers: np.ndarray, separation_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Rows' returns (R, C) sorted by range and merged where closer than `separation_m`: (range, power)
+    of each merged echo nearest first, then inf / 0. A lone return keeps its own range exactly."""
+    n, candidates = ranges_m.shape
+    positions = np.argsort(np.where(powers > 0, ranges_m, np.inf), axis=1, kind="stable")
+    positions += np.arange(0, n * candidates, candidates)[:, None]
+    amps = powers.take(positions)
     present = amps > 0
+    ranges = np.where(present, ranges_m.take(positions), np.inf)
     new_group = np.ones((n, candidates), dtype=bool)
     with np.errstate(invalid="ignore"):
-        new_group[:, 1:] = ~(ranges[:, 1:] - ranges[:, :-1] < receiver.separation_m)
-    group = np.cumsum(new_group, axis=1) - 1
-    flat = (np.arange(n)[:, None] * candidates + group).ravel()
+        new_group[:, 1:] = ~(ranges[:, 1:] - ranges[:, :-1] < separation_m)
+    flat = (np.cumsum(new_group, axis=1) - 1 + np.arange(0, n * candidates, candidates)[:, None]).ravel()
     size = n * candidates
     power = np.bincount(flat, weights=amps.ravel(), minlength=size)
     moment = np.bincount(flat, weights=(amps * np.where(present, ranges, 0.0)).ravel(), minlength=size)
@@ -216,10 +254,8 @@ def select_echoes(ranges_m: np.ndarray, powers: np.ndarray, threshold: float, re
     first_range = np.full(size, np.inf)
     first_range[flat[new_group.ravel()]] = ranges[new_group]
     with np.errstate(divide="ignore", invalid="ignore"):
-        merged = np.where(members > 1, moment / power, first_range)  # one member: its own range, exactly
-    merged, power = merged.reshape(n, candidates), power.reshape(n, candidates)
-    seen = (power > 0) & (power >= detection_level(merged, threshold, receiver, fog_filter))
-    return _kept(merged, power, seen, receiver.max_echoes)
+        merged = np.where(members > 1, moment / power, first_range)
+    return merged.reshape(n, candidates), power.reshape(n, candidates)
 
 
 def _kept(ranges: np.ndarray, powers: np.ndarray, seen: np.ndarray, max_echoes: int) -> EchoLists:
