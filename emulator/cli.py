@@ -49,15 +49,20 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The parser; only the subcommand named in `argv` has its module imported and its options
+    added (`ctl` and `--version` start without loading the simulation or the server)."""
+    chosen = _subcommand_in(sys.argv[1:] if argv is None else argv)
     parser = _Parser(prog="lrf-emulator", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--version", action="version", version=f"%(prog)s {package_version()}")
+    parser.add_argument("--version", action=_VersionAction, help="show the version and exit")
     parser.add_argument("--debug", action="store_true", help="show tracebacks for errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     sub.required = True
     for name, (module_name, help_text) in SUBCOMMANDS.items():
-        module = importlib.import_module(f"emulator.commands.{module_name}")
         command_parser = sub.add_parser(name, help=help_text, description=help_text)
+        if name != chosen:
+            continue
+        module = importlib.import_module(f"emulator.commands.{module_name}")
         # after the subcommand too; SUPPRESS keeps a --debug given before it
         command_parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                                     help="show tracebacks for errors")
@@ -66,20 +71,35 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _subcommand_in(argv: list[str]) -> str | None:
+    """The subcommand: the first argument that is not an option (no top-level option takes a value)."""
+    first = next((arg for arg in argv if not arg.startswith("-")), None)
+    return first if first in SUBCOMMANDS else None
+
+
+class _VersionAction(argparse.Action):
+    """`--version`: the installed version, looked up only when asked for."""
+
+    def __init__(self, option_strings: list[str], dest: str = argparse.SUPPRESS, **kwargs: object) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS, **kwargs)
+
+    def __call__(self, parser: argparse.ArgumentParser, *args: object) -> None:
+        print(f"{parser.prog} {package_version()}")
+        parser.exit()
+
+
 def main(argv: list[str] | None = None) -> int:
     args = None
     hold_stop_signals()
     try:
         # Modules load while stop signals are only held: trimesh catches BaseException
         # around its imports and would turn an interrupt there into a later TypeError.
-        parser = build_parser()
+        parser = build_parser(argv)
         raise_on_stop_signals()
         args = parser.parse_args(argv)
         return int(args._run(args) or 0)
     except UserError as error:
-        if args.debug:
-            traceback.print_exc()
-        sys.stderr.write(f"lrf-emulator {args.command}: {error}\n")
+        _report(args, str(error))
         return 2
     except Interrupted as interrupted:
         return 128 + interrupted.signum
@@ -87,6 +107,17 @@ def main(argv: list[str] | None = None) -> int:
         return 128 + signal.SIGINT
     except BrokenPipeError:
         return 0
+    except Exception as error:  # a bug: still one line, the traceback with --debug
+        _report(args, f"internal error ({type(error).__name__}: {error}); run with --debug for the traceback")
+        return 1
+
+
+def _report(args: argparse.Namespace | None, message: str) -> None:
+    """The error on stderr, each line prefixed with the command (with --debug: its traceback first)."""
+    if args is not None and args.debug:
+        traceback.print_exc()
+    prefix = f"lrf-emulator {args.command}: " if args is not None else "lrf-emulator: "
+    sys.stderr.write("".join(prefix + line + "\n" for line in message.splitlines() or [""]))
 
 
 if __name__ == "__main__":

@@ -20,15 +20,16 @@ from emulator.commands.options import add_scene_options, add_span_options, scene
 from emulator.commands.progress import progress
 from emulator.errors import UserError
 from emulator.plots.map import draw_map
+from emulator.plots.output import output_format
 from emulator.plots.waterfall import draw_waterfall, pyplot, sensor_series
 
 MAX_PIXELS = 8000
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    add_scene_options(parser, seed=False)
+    add_scene_options(parser)
     add_span_options(parser, verb="plot (with --map: whose scan to draw)", out_metavar="FILE.png",
-                     out_help="PNG file to write", required=False)
+                     out_help="image to write, in the format its suffix names (png, svg, pdf, jpg, ...)", required=False)
     parser.add_argument("--map", action="store_true", help="a top-down map of the scene at --time instead of a waterfall")
     parser.add_argument("--time", type=float, default=0.0, metavar="T", help="with --map: the simulated time drawn (s)")
     parser.add_argument("--width", type=int, default=1200, metavar="PX", help="image width in pixels")
@@ -40,6 +41,7 @@ def run(args: argparse.Namespace) -> int:
         if not 200 <= pixels <= MAX_PIXELS:
             raise UserError(f"{name} must be between 200 and {MAX_PIXELS} pixels, got {pixels}")
     pyplot()  # fail before the computation when matplotlib is missing
+    output_format(args.out)  # or when it cannot write the format asked for
     if args.map:
         return _run_map(args)
     if args.sensor is None or args.end is None:
@@ -47,10 +49,7 @@ def run(args: argparse.Namespace) -> int:
     scene = scene_from_args(args)
     series = sensor_series(scene, args.sensor, args.start, args.end,
                            progress=lambda scans, count: progress(scans, count, f"plot {args.sensor}"))
-    try:
-        draw_waterfall(series, args.out, width_px=args.width, height_px=args.height)
-    except OSError as error:
-        raise UserError(f"cannot write {args.out}: {error.strerror or error}") from None
+    draw_waterfall(series, args.out, width_px=args.width, height_px=args.height)
     print(f"wrote {args.out} ({len(series.times_s)} scans of {series.sensor})")
     return 0
 

@@ -8,8 +8,9 @@ the URG-04LX every 0.1 s; the LMS200 every full scan of its resolution, i.e.
 the mirror revolutions that scan needs (1°: 1/75 s, 0.5°: 2/75 s,
 0.25°: 4/75 s), with the scene's angle, resolution and units.
 Scan k is taken at t = k · period, for every k with T0 ≤ t ≤ T1.
-Beside the log goes the ground truth: FILE with the suffix `.tum`, one TUM
-line `t x y z qx qy qz qw` per scan, the sensor's world pose at its time stamp.
+Beside the log goes the ground truth: FILE.tum (`run.log` → `run.log.tum`, so
+`run.log` and `run.mcap` keep theirs apart), one TUM line `t x y z qx qy qz qw`
+per scan, the sensor's world pose at its time stamp.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from emulator.sensors.series import scan_series, scan_times
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    add_scene_options(parser, seed=False)
+    add_scene_options(parser)
     add_span_options(parser, verb="record", out_metavar="FILE", out_help="log file to write")
     add_events_in_option(parser, "--events")
     parser.add_argument(
@@ -63,6 +64,5 @@ def run(args: argparse.Namespace) -> int:
 
 
 def ground_truth_path(log: Path) -> Path:
-    """Where the ground truth of `log` goes: the same name with `.tum` (`.tum` added if the log has it)."""
-    path = log.with_suffix(".tum")
-    return path if path != log else log.with_name(log.name + ".tum")
+    """Where the ground truth of `log` goes: its whole name and `.tum`, so no two logs share one."""
+    return log.with_name(log.name + ".tum")

@@ -1,5 +1,4 @@
-"""`lrf-emulator replay LOG --device urg-04lx|lms200 [--endpoint URI]...` (the CLI spells
-it --model, still accepted), and `replay FILE.mcap --topic T --device ...`: a LaserScan topic of an MCAP file
+"""`lrf-emulator replay LOG --device urg-04lx|lms200 [--endpoint URI]...`, and `replay FILE.mcap --topic T --device ...`: a LaserScan topic of an MCAP file
 (a ROS 2 bag or a Foxglove recording; emulator/recording/mcap_replay.py).
 
 Serves a recorded log (from `record`, or a real sensor's log in the same
@@ -40,10 +39,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("log", type=Path, metavar="LOG", help="a log written by `record` (or in its format), or an MCAP file")
     parser.add_argument("--topic", metavar="T", default=None,
                         help="for an MCAP file: the LaserScan topic to serve (default: its only one)")
-    # --device names the device; every other command's --model is the smoke preset. Earlier
-    # versions spelled it `replay --model urg-04lx|lms200`, so that spelling stays accepted too.
-    parser.add_argument("--device", "--model", dest="model", required=True, choices=MODELS,
-                        help="the device to serve the log as (--model is the same option, kept from earlier versions)")
+    # --device: every other command's --model is the smoke preset
+    parser.add_argument("--device", dest="model", required=True, choices=MODELS, help="the device to serve the log as")
     parser.add_argument(
         "--endpoint", action="append", default=[], metavar="URI",
         help="pty:PATH or tcp:HOST:PORT (repeatable; default: urg-04lx tcp:127.0.0.1:10940, lms200 pty:ttyLMS0)",

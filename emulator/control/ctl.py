@@ -12,6 +12,7 @@ import asyncio
 import json
 import math
 import urllib.error
+import urllib.parse
 import urllib.request
 from typing import Any
 
@@ -25,7 +26,7 @@ class ControlClient:
     """Requests to one daemon's control API; `token` is sent as a Bearer token."""
 
     def __init__(self, url: str = DEFAULT_URL, token: str | None = None) -> None:
-        self.url = url.rstrip("/")
+        self.url = checked_url(url).rstrip("/")
         self.token = token
 
     def _headers(self) -> dict[str, str]:
@@ -93,6 +94,18 @@ class ControlClient:
             raise UserError(f"{error.status}: {error.message}") from None
         except (aiohttp.ClientError, OSError) as error:
             raise UserError(f"cannot reach the control API at {self.url}: {error}") from None
+
+
+def checked_url(url: str) -> str:
+    """`url` if it is an http(s)://HOST[:PORT] address, else a UserError saying what is expected."""
+    try:
+        parts = urllib.parse.urlsplit(url)
+        valid = parts.scheme in ("http", "https") and bool(parts.hostname) and (parts.port is None or parts.port > 0)
+    except ValueError:  # a port out of range or not a number
+        valid = False
+    if not valid:
+        raise UserError(f"--url {url!r}: expected http://HOST:PORT (default {DEFAULT_URL})")
+    return url
 
 
 def scan_line(scan: dict[str, Any]) -> str:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from emulator.errors import UserError
+from emulator.plots.output import save_figure
 from emulator.plots.waterfall import pyplot
 from emulator.scene import Pose, Scene, SceneObject, Shape
 from emulator.scene.bodies import Body, BodyPoses, Frames, Keyframes
@@ -225,9 +225,7 @@ def draw_map(
     axes.plot([x0, x0 + scale], [y0, y0], color="black", linewidth=3, zorder=9)
     axes.text(x0 + scale / 2, y0, f"{scale:g} m", ha="center", va="bottom", fontsize=9, zorder=9)
     try:
-        figure.savefig(out, dpi=dpi, facecolor=BACKGROUND_RGB)
-    except OSError as error:
-        raise UserError(f"cannot write {out}: {error.strerror or error}") from None
+        save_figure(figure, out, dpi=dpi, facecolor=BACKGROUND_RGB)
     finally:
         plt.close(figure)
     return view

@@ -25,6 +25,7 @@ import numpy as np
 
 from emulator.errors import UserError
 from emulator.optics import World
+from emulator.plots.output import save_figure
 from emulator.scene import Scene
 from emulator.sensors import Scan, create_sensor, ranges_m
 from emulator.sensors.beam_geometry import scan_plane_rays
@@ -39,7 +40,6 @@ CAST_RANGE_M = {"urg-04lx": 5.6, "lms200": 80.0}
 NO_RETURN_CODES = {"urg-04lx": (0,), "lms200": (8183, 8191)}
 URG_VALID_STEPS = slice(44, 726)  # the URG-04LX's measurable area, steps 44..725
 
-PNG_METADATA = {"Software": None}  # no version stamp: the same figure gives the same bytes
 ERROR_RGB = (0.86, 0.10, 0.10)
 NO_RETURN_RGB = (0.86, 0.92, 1.0)
 
@@ -153,7 +153,7 @@ def waterfall_rgb(series: SensorSeries) -> np.ndarray:
 
 
 def draw_waterfall(series: SensorSeries, out: Path, *, width_px: int = 1200, height_px: int = 800, title: str = "") -> None:
-    """Write the waterfall PNG of exactly width_px × height_px pixels."""
+    """Write the waterfall (PNG, or the format `out` names) of exactly width_px × height_px pixels."""
     plt = pyplot()
     from matplotlib.patches import Patch
 
@@ -195,5 +195,7 @@ def draw_waterfall(series: SensorSeries, out: Path, *, width_px: int = 1200, hei
         plume_axes.tick_params(labelleft=False)
     if series.has_regions:
         figure.text(0.01, 0.005, SATURATION_NOTE, fontsize="x-small", color="dimgrey")
-    figure.savefig(out, dpi=dpi, metadata=PNG_METADATA)
-    plt.close(figure)
+    try:
+        save_figure(figure, out, dpi=dpi)
+    finally:
+        plt.close(figure)

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from emulator.errors import UserError
+from emulator.plots.output import save_figure
 from emulator.plots.waterfall import (
-    PNG_METADATA,
     SATURATION_CLEAR,
     SATURATION_NOTE,
     SensorSeries,
@@ -91,7 +91,7 @@ def _bocas_figures(scene: Scene, series: SensorSeries, figures_dir: Path) -> tup
     bottom.set_ylabel("range (m)")
     bottom.legend(loc="center right", fontsize="small")
     figure.text(0.01, 0.005, SATURATION_NOTE, fontsize="x-small", color="dimgrey")
-    figure.savefig(fig5, dpi=100, metadata=PNG_METADATA)
+    save_figure(figure, fig5, dpi=100)
     plt.close(figure)
 
     fig9 = figures_dir / "bocas_fig9_saturation_vs_range.png"
@@ -107,7 +107,7 @@ def _bocas_figures(scene: Scene, series: SensorSeries, figures_dir: Path) -> tup
     axes.legend(loc="center right", fontsize="small")
     figure.subplots_adjust(bottom=0.16)
     figure.text(0.01, 0.005, SATURATION_NOTE, fontsize="x-small", color="dimgrey")
-    figure.savefig(fig9, dpi=100, metadata=PNG_METADATA)
+    save_figure(figure, fig9, dpi=100)
     plt.close(figure)
 
     fig7 = figures_dir / "bocas_fig7_density_vs_saturation.png"
@@ -119,7 +119,7 @@ def _bocas_figures(scene: Scene, series: SensorSeries, figures_dir: Path) -> tup
     axes.set_ylabel("camera saturation")
     axes.set_title("density versus saturation (cf. Fig. 7)")
     axes.legend(fontsize="small")
-    figure.savefig(fig7, dpi=100, metadata=PNG_METADATA)
+    save_figure(figure, fig7, dpi=100)
     plt.close(figure)
     return fig5, fig9, fig7
 

@@ -306,7 +306,7 @@ def test_record_writes_the_ground_truth_beside_the_log(tmp_path: Path) -> None:
     write(tmp_path, ROBOT + "trajectory = { keyframes = [[0, 0, 0, 0], [2, 2, 0, 90]] }\n" + RIDER + WALL)
     result = lrf("record", "x.toml", "--sensor", "urg", "--start", "0.5", "--end", "1.5", "--out", "run.log", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
-    rows = [line.split() for line in (tmp_path / "run.tum").read_text().splitlines() if not line.startswith("#")]
+    rows = [line.split() for line in (tmp_path / "run.log.tum").read_text().splitlines() if not line.startswith("#")]
     log_lines = [line for line in (tmp_path / "run.log").read_text().splitlines() if line and not line.startswith("#")]
     assert len(rows) == 11 == len(log_lines)
     truth = np.array(rows, dtype=float)
@@ -315,7 +315,7 @@ def test_record_writes_the_ground_truth_beside_the_log(tmp_path: Path) -> None:
     yaw = np.degrees(2 * np.arctan2(truth[:, 6], truth[:, 7]))
     np.testing.assert_allclose(yaw, 45 * truth[:, 0], atol=1e-6)
     # the file reads back as a trajectory
-    text = ROBOT + 'trajectory = { file = "run.tum" }\n' + RIDER
+    text = ROBOT + 'trajectory = { file = "run.log.tum" }\n' + RIDER
     frames = World(load_scene(write(tmp_path, text, "y.toml"))).bodies.frames("robot", np.array([1.0]))
     assert frames.positions[0] == pytest.approx([1.0, 0.0, 0.0])
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -17,6 +18,7 @@ from emulator.plots.waterfall import (
     sensor_series,
     waterfall_rgb,
 )
+from emulator.errors import UserError
 from emulator.scene import load_scene
 
 CLI = [sys.executable, "-m", "emulator.cli"]
@@ -94,3 +96,69 @@ def test_plot_errors_are_one_line(tmp_path: Path, args: list[str], message: str)
     assert result.returncode == 2
     assert message in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+# What each format's file starts with (pgf: LaTeX text; raw and rgba: bare pixels, 4 bytes each).
+MAGIC = {
+    "png": b"\x89PNG", "jpg": b"\xff\xd8\xff", "jpeg": b"\xff\xd8\xff", "gif": b"GIF8", "webp": b"RIFF",
+    "tif": b"II*\x00", "tiff": b"II*\x00", "pdf": b"%PDF", "eps": b"%!PS", "ps": b"%!PS", "svg": b"<?xml",
+    "svgz": b"\x1f\x8b", "avif": b"\x00\x00\x00", "pgf": b"%%", "raw": b"", "rgba": b"",
+}
+
+
+def test_every_format_matplotlib_writes_is_written(tmp_path: Path) -> None:
+    from emulator.plots.output import supported_formats
+    from emulator.plots.waterfall import draw_waterfall
+
+    series = sensor_series(load_scene("bocas"), "urg", 71.0, 71.5)
+    assert {"png", "jpg", "svg", "pdf"} <= set(supported_formats()) <= set(MAGIC)
+    for fmt in supported_formats():
+        out = tmp_path / f"waterfall.{fmt}"
+        if fmt == "pgf" and shutil.which("xelatex") is None:  # pgf measures its text with LaTeX
+            with pytest.raises(UserError, match=r"cannot write .*waterfall\.pgf as pgf: 'xelatex' not found"):
+                draw_waterfall(series, out, width_px=300, height_px=200)
+            assert not out.exists()
+            continue
+        draw_waterfall(series, out, width_px=300, height_px=200)
+        data = out.read_bytes()
+        assert data.startswith(MAGIC[fmt]), fmt
+        if fmt in ("raw", "rgba"):
+            assert len(data) == 300 * 200 * 4
+    assert not [path for path in tmp_path.iterdir() if path.name.startswith(".")]  # no partial file left
+
+
+@pytest.mark.parametrize(("name", "magic"), [("x.jpg", b"\xff\xd8\xff"), ("x.svg", b"<?xml"), ("map.svg", b"<?xml")])
+def test_plot_writes_jpg_and_svg(tmp_path: Path, name: str, magic: bytes) -> None:
+    args = ["bocas", "--map"] if name.startswith("map") else ["bocas", "--sensor", "urg", "--end", "1"]
+    result = plot(tmp_path, *args, "--out", name, "--width", "400", "--height", "300")
+    assert result.returncode == 0 and result.stderr == "", result.stderr
+    assert (tmp_path / name).read_bytes().startswith(magic)
+    assert [path.name for path in tmp_path.iterdir()] == [name]
+
+
+def test_an_unknown_format_is_one_line_before_any_work(tmp_path: Path) -> None:
+    result = plot(tmp_path, "bocas", "--sensor", "urg", "--end", "60", "--out", "x.doc")
+    assert result.returncode == 2
+    assert result.stderr.startswith("lrf-emulator plot: --out x.doc: cannot write .doc files (known: ")
+    assert "png" in result.stderr and "svg" in result.stderr and len(result.stderr.splitlines()) == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_write_that_fails_midway_leaves_the_old_file_whole(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The figure goes to a partial file renamed over the target only once complete."""
+    from matplotlib.figure import Figure
+
+    from emulator.plots.output import save_figure
+
+    out = tmp_path / "x.svg"
+    out.write_text("the old picture")
+
+    def half_written(self: Figure, file, **kwargs) -> None:
+        file.write(b"<?xml half")
+        raise ValueError("broken on the way")
+
+    monkeypatch.setattr(Figure, "savefig", half_written)
+    with pytest.raises(UserError, match=r"^cannot write .*x\.svg as svg: broken on the way$"):
+        save_figure(Figure(), out)
+    assert out.read_text() == "the old picture"
+    assert [path.name for path in tmp_path.iterdir()] == ["x.svg"]

@@ -143,7 +143,7 @@ def test_record_model_override_changes_the_response(tmp_path: Path) -> None:
     [
         (["record", "bocas", "--sensor", "nope", "--end", "1", "--out", "x.log"], "no sensor named 'nope'"),
         (["record", "bocas", "--sensor", "urg", "--start", "5", "--end", "1", "--out", "x.log"], "need 0 <= --start <= --end"),
-        (["replay", "missing.log", "--model", "urg-04lx"], "no such log file"),
+        (["replay", "missing.log", "--device", "urg-04lx"], "no such log file"),
         (["record", "bocas", "--sensor", "urg", "--end", "1", "--model", "bogus", "--out", "x.log"],
          "unknown smoke model 'bogus'"),
     ],
@@ -211,8 +211,8 @@ def test_replay_refuses_a_log_of_the_other_model(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--model", "lms200"], "the log was recorded from a urg-04lx, not a lms200"),
-        (["--model", "urg-04lx", "--endpoint", "bogus:x"], "endpoint 'bogus:x': expected pty:PATH, tcp:HOST:PORT or rfc2217:HOST:PORT with PORT 0..65535"),
+        (["--device", "lms200"], "the log was recorded from a urg-04lx, not a lms200"),
+        (["--device", "urg-04lx", "--endpoint", "bogus:x"], "endpoint 'bogus:x': expected pty:PATH, tcp:HOST:PORT or rfc2217:HOST:PORT with PORT 0..65535"),
     ],
 )
 def test_replay_errors_are_one_line(tmp_path: Path, args: list[str], message: str) -> None:

@@ -32,12 +32,12 @@ def test_replay_of_an_mcap_without_that_topic_is_one_line(tmp_path: Path) -> Non
     recording = tmp_path / "urg.mcap"
     assert run("record", "railway", "--sensor", "urg", "--start", "0", "--end", "0.2", "--out", str(recording),
                "--format", "mcap", cwd=tmp_path).returncode == 0
-    result = run("replay", str(recording), "--model", "urg-04lx", "--topic", "/lms/scan", cwd=tmp_path)
+    result = run("replay", str(recording), "--device", "urg-04lx", "--topic", "/lms/scan", cwd=tmp_path)
     assert result.returncode == 2
     assert result.stderr == (
         "lrf-emulator replay: urg.mcap: --topic /lms/scan: not a LaserScan topic (LaserScan topics: /urg/scan)\n"
     )
     text = tmp_path / "urg.log"
     text.write_text("# lrf-emulator log sensor=urg model=urg-04lx unit=mm\n0.000 0.0 100\n")
-    result = run("replay", str(text), "--model", "urg-04lx", "--topic", "/scan", cwd=tmp_path)
+    result = run("replay", str(text), "--device", "urg-04lx", "--topic", "/scan", cwd=tmp_path)
     assert result.returncode == 2 and "is not an MCAP file" in result.stderr

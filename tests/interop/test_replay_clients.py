@@ -45,7 +45,7 @@ def record(tmp_path: Path, scene: str, sensor: str, start: float, end: float) ->
 def replaying(log: Path, model: str, endpoint: str, cwd: Path, *extra: str) -> Iterator[ReadyEndpoint]:
     """The real `lrf-emulator replay` process; yields its ready endpoint, SIGTERMs it after."""
     process = subprocess.Popen(
-        [*CLI, "replay", str(log), "--model", model, "--endpoint", endpoint, *extra],
+        [*CLI, "replay", str(log), "--device", model, "--endpoint", endpoint, *extra],
         cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     try:
