@@ -85,14 +85,14 @@ def test_malformed_arguments_are_one_line_and_exit_2(tmp_path: Path, args: list[
     assert list(tmp_path.iterdir()) == []  # nothing written
 
 
-def imported_modules(*args: str) -> set[str]:
+def imported_modules(tmp_path: Path, *args: str) -> set[str]:
     """The modules `lrf-emulator ARGS` has imported when it exits."""
     code = (
         "import sys, json\nfrom emulator.cli import main\n"
         f"try:\n    main({list(args)!r})\nexcept SystemExit:\n    pass\n"
         "print(json.dumps(sorted(sys.modules)))\n"
     )
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=tmp_path)
     return set(json.loads(result.stdout.splitlines()[-1]))
 
 
@@ -101,8 +101,8 @@ SERVER_MODULES = ("numpy", "trimesh", "embreex", "aiohttp", "emulator.scene", "e
 
 
 @pytest.mark.parametrize("args", [["--version"], ["ctl", "--url", "http://127.0.0.1:1", "state"], ["ctl", "--help"]])
-def test_ctl_and_version_start_without_the_server(args: list[str]) -> None:
-    modules = imported_modules(*args)
+def test_ctl_and_version_start_without_the_server(tmp_path: Path, args: list[str]) -> None:
+    modules = imported_modules(tmp_path, *args)
     assert "emulator.cli" in modules
     assert not [name for name in modules if name.split(".")[0] in SERVER_MODULES or name.startswith(SERVER_MODULES)]
 
