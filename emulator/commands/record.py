@@ -6,7 +6,9 @@ Writes one log line per scan (emulator/recording/textlog.py), or with
 period, as the scene configures it (`configured_scan`, `configured_period_s`):
 the URG-04LX every 0.1 s; the LMS200 every full scan of its resolution, i.e.
 the mirror revolutions that scan needs (1°: 1/75 s, 0.5°: 2/75 s,
-0.25°: 4/75 s), with the scene's angle, resolution and units.
+0.25°: 4/75 s), with the scene's angle, resolution and units. Each scan holds
+the beams the device measures, as its ROS driver publishes them
+(emulator/sensors/published.py: the URG-04LX's steps 44..725).
 Scan k is taken at t = k · period, for every k with T0 ≤ t ≤ T1.
 Beside the log goes the ground truth: FILE.tum (`run.log` → `run.log.tum`, so
 `run.log` and `run.mcap` keep theirs apart), one TUM line `t x y z qx qy qz qw`
@@ -25,6 +27,7 @@ from emulator.errors import UserError
 from emulator.recording.ground_truth import with_ground_truth
 from emulator.recording.textlog import LogHeader, write_log
 from emulator.sensors import create_sensor
+from emulator.sensors.published import published
 from emulator.sensors.series import scan_series, scan_times
 
 
@@ -42,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     scene = scene_from_args(args)
     sensor = create_sensor(scene, args.sensor, world_from_args(scene, args))
     times = scan_times(sensor.configured_period_s, args.start, args.end, sensor.configured_phase_s)
-    scans = progress(scan_series(sensor, times), len(times), f"record {sensor.name}")
+    scans = map(published, progress(scan_series(sensor, times), len(times), f"record {sensor.name}"))
     first = next(scans, None)
     if first is None:
         raise UserError(f"no scan of {sensor.name} completes between {args.start} and {args.end} s")

@@ -1,8 +1,10 @@
 """`lrf-emulator scan SCENE --sensor NAME [--time T] [--seed N] [--model PRESET]`: one scan as JSON.
 
-The URG-04LX gives all 769 steps (0..768; steps outside 44..725 carry the
-sensor's out-of-area value); the LMS200 the scan its scene options select
-(angle_deg, resolution_deg, units), e.g. 100° → device angles 40°..140°.
+The scan as its ROS driver publishes it (emulator/sensors/published.py): the
+URG-04LX its measured steps 44..725 (682 values; the protocol also sends
+steps 0..43 and 726..768, which it never measures); the LMS200 the scan its
+scene options select (angle_deg, resolution_deg, units), e.g. 100° → device
+angles 40°..140°. Beside them the LaserScan fields angle_min … range_max.
 `pose` is the sensor's world pose at the scan's time stamp and `times_s` the
 instant each value was measured (the mirror sweeps the beams one by one; a
 sensor on a moving body casts each beam from where it is at that instant).

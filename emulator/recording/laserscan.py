@@ -20,32 +20,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from emulator.sensors import lms200, urg04lx
-
-URG_CODES_AS_INF = (urg04lx.NO_ECHO,)
-URG_CODES_AS_NEG_INF = (urg04lx.NON_MEASURABLE,)
-LMS_CODES_AS_INF = (lms200.NO_ECHO, lms200.ABOVE_MAXIMUM)
-LMS_FOR_NAN = 8187  # signal-to-noise too small
-LMS_FOR_TOO_CLOSE = 0
-LMS_MAX_DISTANCE = lms200.ABOVE_MAXIMUM - 1  # 8182 units
+from emulator.sensors.published import publication
 
 
 def values_to_ranges(values: np.ndarray, model: str, unit: str = "mm") -> np.ndarray:
     """Metres per device value; error codes as +inf, -inf or NaN (module docstring)."""
+    entry = publication(model)
     values = np.asarray(values, dtype=np.int64)
-    if model == urg04lx.MODEL:
-        ranges = values / 1000.0
-        is_code = values < urg04lx.MIN_VALUE_MM
-        ranges[is_code] = np.nan
-        ranges[np.isin(values, URG_CODES_AS_INF)] = np.inf
-        ranges[np.isin(values, URG_CODES_AS_NEG_INF)] = -np.inf
-        return ranges
-    if model == lms200.MODEL:
-        ranges = values / lms200.UNITS_PER_M[unit]
-        ranges[values >= lms200.ABOVE_MAXIMUM] = np.nan
-        ranges[np.isin(values, LMS_CODES_AS_INF)] = np.inf
-        return ranges
-    raise ValueError(f"unknown sensor model {model!r}")
+    ranges = values / entry.units_per_m[unit]
+    low, high = entry.distances
+    ranges[(values < low) | (values > high)] = np.nan
+    ranges[np.isin(values, entry.no_return)] = np.inf
+    ranges[np.isin(values, entry.too_close)] = -np.inf
+    return ranges
 
 
 def ranges_to_values(
@@ -53,25 +40,19 @@ def ranges_to_values(
 ) -> np.ndarray:
     """Device values for ranges in metres (module docstring); `range_min_m`/`range_max_m`
     are the recording scanner's limits (ROS LaserScan): readings outside them are invalid."""
+    entry = publication(model)
+    no_return, too_close_code, erroneous = entry.replay_codes
+    low, high = entry.distances
     ranges = np.asarray(ranges_m, dtype=float)
     with np.errstate(invalid="ignore"):
         too_far = (ranges == np.inf) | (np.isfinite(ranges) & (ranges > range_max_m))
         too_close = (ranges == -np.inf) | (np.isfinite(ranges) & (ranges < range_min_m))
     invalid = np.isnan(ranges)
     finite = np.where(np.isfinite(ranges), ranges, 0.0)
-    if model == urg04lx.MODEL:
-        values = np.round(finite * 1000.0).astype(np.int64)
-        too_close |= values < urg04lx.MIN_VALUE_MM
-        too_far |= values > round(urg04lx.MAX_RANGE_M * 1000)
-        values[too_far] = urg04lx.NO_ECHO
-        values[too_close & ~too_far] = urg04lx.NON_MEASURABLE
-        values[invalid] = urg04lx.LOW_INTENSITY
-        return values
-    if model == lms200.MODEL:
-        values = np.round(finite * lms200.UNITS_PER_M[unit]).astype(np.int64)
-        values[values > LMS_MAX_DISTANCE] = lms200.ABOVE_MAXIMUM
-        values[too_far] = lms200.NO_ECHO
-        values[too_close & ~too_far] = LMS_FOR_TOO_CLOSE
-        values[invalid] = LMS_FOR_NAN
-        return values
-    raise ValueError(f"unknown sensor model {model!r}")
+    values = np.round(finite * entry.units_per_m[unit]).astype(np.int64)
+    too_close |= values < low
+    values[values > high] = entry.above_maximum
+    values[too_far] = no_return
+    values[too_close & ~too_far] = too_close_code
+    values[invalid] = erroneous
+    return values

@@ -4,8 +4,8 @@ Channels (Foxglove's well-known schemas, protobuf-encoded by foxglove-sdk):
 
 | topic | schema | what |
 |---|---|---|
-| `/SENSOR/scan` | `foxglove.LaserScan` | each scan in metres, frame `SENSOR`; error codes as ±inf / NaN (`laserscan.py`) |
-| `/SENSOR/values` | `lrf.DeviceValues` (JSON) | the same scan's values exactly as on the wire, unit and codes included |
+| `/SENSOR/scan` | `foxglove.LaserScan` | each scan's measured beams (`sensors/published.py`) in metres, frame `SENSOR`; error codes as ±inf / NaN (`laserscan.py`) |
+| `/SENSOR/values` | `lrf.DeviceValues` (JSON) | the same beams' values exactly as on the wire, unit and codes included |
 | `/tf` | `foxglove.FrameTransforms` | `world` → each sensor (and body) at the scan's instant |
 | `/scene` | `foxglove.SceneUpdate` | entity `solids` (once), `smoke` (regions, opacity from density) and `plumes` (particles) |
 
@@ -52,6 +52,7 @@ from emulator.recording.scene_look import (
 from emulator.recording.world_snapshot import SceneSnapshots, WorldSnapshot
 from emulator.scene.geometry import world_mesh
 from emulator.scene.model import Box, Cylinder, Pose, Scene, Shape, Sphere
+from emulator.sensors.published import published
 from emulator.sensors.scan import Scan
 
 WORLD_FRAME = "world"
@@ -205,10 +206,11 @@ class SceneChannels:
         self._smoke_drawn_at: float | None = None
 
     def log_scan(self, scan: Scan) -> None:
-        """The scan on `/SENSOR/scan` and its wire values on `/SENSOR/values`."""
+        """The scan's measured beams (`published`) on `/SENSOR/scan` and their wire values on `/SENSOR/values`."""
         channel = self._scans.get(scan.sensor)
         if channel is None:
             return
+        scan = published(scan)
         log_time = nanoseconds_of(scan.time_s)
         channel.log(laser_scan(scan), log_time=log_time)
         self._values[scan.sensor].log(device_values(scan), log_time=log_time)

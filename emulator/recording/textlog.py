@@ -12,6 +12,11 @@ pairs of angles (radians) and distances." Our exact form:
   straight ahead, positive to the left) and the device value as an integer,
   exactly as it went on the wire (URG: mm or an error code < 20; LMS200: mm or
   cm per `unit`, or a code 8183..8191), so error codes survive the round trip;
+- the pairs are the beams the device measures, as its ROS driver publishes
+  them (`record` writes `sensors.published`: the URG-04LX's steps 44..725,
+  682 pairs; the LMS200 its window). The paper fixes what a line holds (a
+  timestamp, then angle/distance pairs) but not which beams; reading accepts
+  any pairs on the device's grid;
 - lines starting with `#` are comments; the optional header comment names the
   sensor, model and unit as `key=value` words. Blank lines are ignored.
 

@@ -1,4 +1,9 @@
-"""A scan as the JSON of `lrf-emulator scan`, shared by the command and the control API."""
+"""A scan as the JSON of `lrf-emulator scan`, shared by the command and the control API.
+
+The scan as its ROS driver publishes it (`published.py`): only the beams the
+device measures, and the LaserScan fields (`angle_min` … `range_max`) beside
+the wire values and metres.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +11,7 @@ import numpy as np
 
 from emulator.scene.bodies import matrix_euler_deg, matrix_quaternion
 from emulator.sensors import Scan, Sensor, beam_times_s, ranges_m
+from emulator.sensors.published import laser_scan_fields, published
 
 ANGLE_DECIMALS = 9  # the devices' angles are exact in far fewer digits; drop float noise
 TIME_DECIMALS = 9  # beam instants: nanoseconds, far below the µs grid the world is evaluated on
@@ -23,7 +29,8 @@ def pose_json(sensor: Sensor, time_s: float) -> dict:
 
 
 def scan_json(scan: Scan, sensor: Sensor | None = None) -> dict:
-    """The scan as JSON; with the `sensor` that took it, also its `pose` and the beams' `times_s`."""
+    """The scan's measured beams as JSON; with the `sensor` that took it, also its `pose` and the beams' `times_s`."""
+    scan = published(scan)
     ranges = ranges_m(scan)
     extra = {} if sensor is None else {
         "pose": pose_json(sensor, scan.time_s),
@@ -37,5 +44,6 @@ def scan_json(scan: Scan, sensor: Sensor | None = None) -> dict:
         "angles_deg": np.round(np.degrees(scan.angles_rad), ANGLE_DECIMALS).tolist(),
         "values": [int(v) for v in scan.values],
         "ranges_m": [None if np.isnan(r) else float(r) for r in ranges],
+        **laser_scan_fields(scan),
         **extra,
     }

@@ -40,6 +40,7 @@ from emulator.recording.world_snapshot import SceneSnapshots, WorldSnapshot
 from emulator.scene.bodies import Live
 from emulator.scene.model import Box, Cylinder, Pose, Scene, Shape, Sphere
 from emulator.scene.geometry import shape_mesh
+from emulator.sensors.published import published
 from emulator.sensors.scan import Scan
 from emulator.view.control_client import ControlClient, ControlError
 from emulator.view.process import PortTaken
@@ -69,7 +70,9 @@ def rotation_deg_of(wxyz: np.ndarray) -> list[float]:
 
 
 def scan_points(scan: Scan, pose: Pose) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """World points of the scan's echoes with their colours, and the red marks of its error beams."""
+    """World points of the scan's echoes with their colours, and the red marks of its error beams
+    (its measured beams only: `published`)."""
+    scan = published(scan)
     ranges = values_to_ranges(scan.values, scan.model, scan.unit)
     angles = np.asarray(scan.angles_rad, dtype=float)
     local = np.stack([np.cos(angles), np.sin(angles), np.zeros_like(angles)], axis=1)

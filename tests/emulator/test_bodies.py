@@ -299,7 +299,9 @@ def test_scan_json_gives_the_pose_at_its_time_stamp_and_each_beams_instant(tmp_p
     assert out["pose"]["position"] == pytest.approx([1 + half, half, 0.3])
     assert out["pose"]["rotation_deg"] == pytest.approx([0, 0, 45])
     assert out["pose"]["quaternion"] == pytest.approx([0, 0, math.sin(math.radians(22.5)), math.cos(math.radians(22.5))])
-    assert out["times_s"][768] == 1.0 and out["times_s"][0] == pytest.approx(1 - 0.075, abs=1e-9)
+    # steps 44..725 of a scan completed by step 768 at t = 1 s, 100 ms per 1024 steps
+    assert out["times_s"][-1] == pytest.approx(1 - 43 * 0.1 / 1024, abs=1e-9)
+    assert out["times_s"][0] == pytest.approx(1 - 724 * 0.1 / 1024, abs=1e-9)
 
 
 def test_record_writes_the_ground_truth_beside_the_log(tmp_path: Path) -> None:

@@ -95,9 +95,11 @@ def test_record_writes_the_sensors_scans_at_its_period(tmp_path: Path) -> None:
     expected_times = np.arange(701, 731) / 10
     assert np.allclose(log.times_s, expected_times)
     sensor = create_sensor(load_scene("bocas"), "urg")
+    assert log.values.shape[1] == 682  # the measured steps 44..725
+    assert log.angles_rad[0, 0] == pytest.approx(round((44 - 384) * 2 * np.pi / 1024, 6))
     for time_s, values in zip(expected_times, log.values):
-        assert np.array_equal(values, sensor.scan(float(time_s)).values)
-    assert len(set(log.values[:, 384].tolist())) == 2  # the onset (range → error 1) is inside this window
+        assert np.array_equal(values, sensor.scan(float(time_s)).values[44:726])
+    assert len(set(log.values[:, 384 - 44].tolist())) == 2  # the onset (range → error 1) is inside this window
 
 
 def test_record_takes_a_scenes_later_urgs_at_their_revolution_phase(tmp_path: Path) -> None:

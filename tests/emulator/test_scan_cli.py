@@ -74,23 +74,32 @@ def scan(*args: str) -> dict:
     return json.loads(result.stdout)
 
 
+LASER_SCAN_FIELDS = {"angle_min", "angle_max", "angle_increment", "time_increment", "scan_time", "range_min", "range_max"}
+FRONT = 384 - 44  # step 384 (straight ahead) among the measured steps 44..725
+
+
 def test_urg_scan_json(scene_file):
     out = scan(str(scene_file), "--sensor", "urg", "--time", "1")
-    assert set(out) == {"sensor", "model", "time_s", "unit", "angles_deg", "values", "ranges_m", "pose", "times_s"}
+    assert set(out) == {"sensor", "model", "time_s", "unit", "angles_deg", "values", "ranges_m", "pose", "times_s"} | LASER_SCAN_FIELDS
     assert (out["sensor"], out["model"], out["time_s"], out["unit"]) == ("urg", "urg-04lx", 1.0, "mm")
-    assert len(out["times_s"]) == 769 and out["times_s"][-1] == 1.0  # the last step completes the scan
-    assert out["times_s"][0] == pytest.approx(1.0 - 768 * 0.1 / 1024, abs=1e-9)
-    assert len(out["angles_deg"]) == len(out["values"]) == len(out["ranges_m"]) == 769
-    assert out["angles_deg"][384] == 0.0 and out["angles_deg"][0] == -135.0
-    assert out["values"][384] == 3000 and out["ranges_m"][384] == 3.0
-    assert out["values"][0] == 0 and out["ranges_m"][0] is None
+    # the measured steps 44..725 only (PP: AMIN 44, AMAX 725), as urg_node publishes them
+    assert len(out["angles_deg"]) == len(out["values"]) == len(out["ranges_m"]) == len(out["times_s"]) == 682
+    assert out["times_s"][-1] == pytest.approx(1.0 - (768 - 725) * 0.1 / 1024, abs=1e-9)  # step 768 completes the scan
+    assert out["times_s"][0] == pytest.approx(1.0 - (768 - 44) * 0.1 / 1024, abs=1e-9)
+    assert out["angles_deg"][FRONT] == 0.0 and out["angles_deg"][0] == pytest.approx(-340 * 360 / 1024)
+    assert out["angle_min"] == pytest.approx(math.radians(-340 * 360 / 1024))
+    assert out["angle_max"] == pytest.approx(math.radians(341 * 360 / 1024))
+    assert out["angle_increment"] == pytest.approx(2 * math.pi / 1024)
+    assert (out["scan_time"], out["range_min"], out["range_max"]) == (0.1, 0.02, 5.6)
+    assert out["time_increment"] == pytest.approx(0.1 / 1024)
+    assert out["values"][FRONT] == 3000 and out["ranges_m"][FRONT] == 3.0
 
 
 def test_time_moves_the_keyframed_smoke(scene_file):
     """0.008 d/10 s × 2 m of fog passes 0.007 d·m at t = 4.375 s."""
-    assert scan(str(scene_file), "--sensor", "urg", "--time", "4.3")["values"][384] == 3000
+    assert scan(str(scene_file), "--sensor", "urg", "--time", "4.3")["values"][FRONT] == 3000
     late = scan(str(scene_file), "--sensor", "urg", "--time", "4.45")
-    assert late["values"][384] == 1 and late["ranges_m"][384] is None
+    assert late["values"][FRONT] == 1 and late["ranges_m"][FRONT] is None
 
 
 def test_lms_scan_uses_the_scene_window_and_unit(scene_file):
@@ -100,6 +109,9 @@ def test_lms_scan_uses_the_scene_window_and_unit(scene_file):
     assert out["values"][50] == 300
     assert out["values"][30] == round(300 / math.cos(math.radians(20)))
     assert out["ranges_m"][50] == 3.0
+    assert (out["angle_min"], out["angle_max"]) == pytest.approx((math.radians(-50), math.radians(50)))
+    assert out["angle_increment"] == pytest.approx(math.radians(1))
+    assert (out["scan_time"], out["range_min"], out["range_max"]) == pytest.approx((1 / 75, 0.0, 81.0))  # sicklms: cm
 
 
 def test_seed_override_changes_only_the_plume(scene_file):
@@ -107,12 +119,12 @@ def test_seed_override_changes_only_the_plume(scene_file):
     default, same, other = scan(*args), scan(*args, "--seed", "3"), scan(*args, "--seed", "4")
     assert default == same
     assert default["values"] != other["values"]
-    assert default["values"][384] == other["values"][384]  # the straight-ahead beam never meets the plume
+    assert default["values"][FRONT] == other["values"][FRONT]  # the straight-ahead beam never meets the plume
 
 
 def test_bundled_scene_by_name():
     out = scan("railway", "--sensor", "urg", "--time", "5")
-    assert out["sensor"] == "urg" and len(out["values"]) == 769
+    assert out["sensor"] == "urg" and len(out["values"]) == 682
 
 
 def test_unknown_sensor_is_one_line_exit_2(scene_file):
@@ -133,7 +145,7 @@ def test_model_override_selects_the_preset(scene_file):
     args = (str(scene_file), "--sensor", "urg", "--time", "1")
     paper, physical = scan(*args), scan(*args, "--model", "physical")
     scene = apply_model_override(load_scene(scene_file), "physical")
-    assert physical["values"] == create_sensor(scene, "urg").scan(1.0).values.tolist()
+    assert physical["values"] == create_sensor(scene, "urg").scan(1.0).values[44:726].tolist()
     assert physical["values"] != paper["values"]  # datasheet noise in clear air
 
 
