@@ -20,6 +20,8 @@ from typing import Mapping
 
 import numpy as np
 
+from emulator.scene import sick_models
+from emulator.scene.sick_models import FREQUENCY_TICKS_PER_HZ, SickModel
 from emulator.sensors import lms200, urg04lx
 from emulator.sensors.scan import Scan
 
@@ -53,6 +55,26 @@ class Publication:
     too_close: tuple[int, ...]
     replay_codes: tuple[int, int, int]
     above_maximum: int
+
+
+def _cola_publication(sick: SickModel) -> Publication:
+    """A CoLa SICK measures its whole field; `values` are first-echo distance counts, 0 for none."""
+    counts_per_m = 1000.0 / sick.distance_scale
+    return Publication(
+        model=sick.name,
+        driver="sick_scan_xd",
+        measured_rad=(math.radians(sick.start_deg - 90.0), math.radians(sick.stop_deg - 90.0)),
+        revolution_s=FREQUENCY_TICKS_PER_HZ / sick.default[0],
+        revolutions={},
+        range_min_m=sick.min_range_m,
+        range_max_m={"mm": sick.max_range_m},
+        units_per_m={"mm": counts_per_m},
+        distances=(1, int(math.ceil(sick.max_range_m * counts_per_m))),
+        no_return=(0,),
+        too_close=(),
+        replay_codes=(0, 0, 0),
+        above_maximum=0,
+    )
 
 
 def _urg_step_rad(step: int) -> float:
@@ -92,6 +114,7 @@ PUBLICATIONS: dict[str, Publication] = {
             replay_codes=(lms200.NO_ECHO, 0, 8187),  # 8187: signal-to-noise too small, what smoke gives
             above_maximum=lms200.ABOVE_MAXIMUM,
         ),
+        *(_cola_publication(sick) for sick in sick_models.MODELS.values()),
     )
 }
 
@@ -124,8 +147,11 @@ def published(scan: Scan) -> Scan:
     return dataclasses.replace(scan, **cropped)
 
 
-def scan_time_s(scan: Scan) -> float:
-    """The time one scan takes: a mirror turn, or the turns an interlaced resolution needs."""
+def scan_time_s(scan: Scan, period_s: float | None = None) -> float:
+    """The time one scan takes: `period_s` when the caller knows it (the sensor's configured period),
+    else a mirror turn at the model's power-on rate, or the turns an interlaced resolution needs."""
+    if period_s is not None:
+        return float(period_s)
     entry = publication(scan.model)
     if not entry.revolutions or len(scan.angles_rad) < 2:
         return entry.revolution_s
@@ -133,15 +159,15 @@ def scan_time_s(scan: Scan) -> float:
     return entry.revolutions.get(step_deg, 1) * entry.revolution_s
 
 
-def laser_scan_fields(scan: Scan) -> dict[str, float]:
+def laser_scan_fields(scan: Scan, period_s: float | None = None) -> dict[str, float]:
     """The LaserScan fields besides the ranges, as the model's driver sets them for this (published) scan:
     angle_min/max the first and last beam, angle_increment their spacing, scan_time, time_increment
     (scan_time · angle_increment / 2π: the time the mirror takes to turn one increment in a revolution
-    measuring the whole scan), range_min/range_max of the unit."""
+    measuring the whole scan), range_min/range_max of the unit. `period_s`: as for `scan_time_s`."""
     entry = publication(scan.model)
     angles = np.asarray(scan.angles_rad, dtype=float)
     increment = float((angles[-1] - angles[0]) / (len(angles) - 1)) if len(angles) > 1 else 0.0
-    scan_time = scan_time_s(scan)
+    scan_time = scan_time_s(scan, period_s)
     return {
         "angle_min": float(angles[0]),
         "angle_max": float(angles[-1]),

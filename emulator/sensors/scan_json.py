@@ -44,6 +44,6 @@ def scan_json(scan: Scan, sensor: Sensor | None = None) -> dict:
         "angles_deg": np.round(np.degrees(scan.angles_rad), ANGLE_DECIMALS).tolist(),
         "values": [int(v) for v in scan.values],
         "ranges_m": [None if np.isnan(r) else float(r) for r in ranges],
-        **laser_scan_fields(scan),
+        **laser_scan_fields(scan, None if sensor is None else sensor.configured_period_s),
         **extra,
     }

@@ -82,6 +82,18 @@ def test_urg_fields_are_urg_nodes() -> None:
     assert (fields["range_min"], fields["range_max"]) == (0.02, 5.6)
 
 
+@pytest.mark.parametrize("model, first_deg, last_deg", [("tim571", -135.0, 135.0), ("lms511", -95.0, 95.0)])
+def test_a_cola_sick_publishes_its_whole_field(model: str, first_deg: float, last_deg: float) -> None:
+    angles = np.radians(np.linspace(first_deg, last_deg, 11))
+    values = np.array([0, 1000, 2000, 0, 5, 6, 7, 8, 9, 10, 11])
+    scan = Scan("front", model, 1.0, angles, values, "mm")
+    assert published(scan) is scan
+    fields = laser_scan_fields(scan, period_s=0.04)
+    assert (fields["angle_min"], fields["angle_max"]) == pytest.approx((math.radians(first_deg), math.radians(last_deg)))
+    assert fields["scan_time"] == 0.04
+    assert values_to_ranges(values, model)[0] == np.inf  # no echo: nothing within reach
+
+
 def test_cropping_keeps_every_per_beam_field_aligned() -> None:
     angles = urg04lx.step_angles_rad()
     reflector = np.arange(769) % 2 == 0
