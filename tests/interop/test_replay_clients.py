@@ -27,7 +27,7 @@ from emulator.bench.serve_process import ReadyEndpoint, parse_ready_line
 from emulator.recording.textlog import Log, read_log
 
 CLI = [sys.executable, "-m", "emulator.cli"]
-URG_VALID = slice(44, 726)
+URG_FRONT = 384 - 44  # step 384 among the logged steps 44..725 (what hokuyolx reads)
 LMS_DISTANCE_BITS = 0x1FFF
 
 
@@ -75,6 +75,7 @@ def recorded_row(log: Log, timestamp_ms: int) -> int:
 def test_hokuyolx_gets_the_recorded_urg_values(tmp_path: Path, tcp_port: int) -> None:
     log_path = record(tmp_path, "bocas", "urg", 70.0, 74.0)  # the error onset at 71.6 s lies inside; 41 rows: GDs a cycle apart (0.1 s reply + 0.2 s) meet distinct rows
     log = read_log(log_path)
+    assert log.values.shape[1] == 682  # record logs the measured steps 44..725
     with replaying(log_path, "urg-04lx", f"tcp:127.0.0.1:{tcp_port}", tmp_path) as ready:
         assert (ready.sensor, ready.model) == ("urg", "urg-04lx")
         laser = HokuyoLX(addr=ready.address, tsync=False, convert_time=False)
@@ -83,16 +84,16 @@ def test_hokuyolx_gets_the_recorded_urg_values(tmp_path: Path, tcp_port: int) ->
             for _ in range(12):
                 timestamp_ms, values = laser.get_dist()
                 row = recorded_row(log, timestamp_ms)
-                assert np.array_equal(values, log.values[row, URG_VALID]), f"row {row}"
+                assert np.array_equal(values, log.values[row]), f"row {row}"
                 seen_rows.add(row)
                 time.sleep(0.2)
             streamed = list(laser.iter_dist(5))
             assert [pending for _, _, pending in streamed] == [4, 3, 2, 1, 0]
             for values, timestamp_ms, _ in streamed:
-                assert np.array_equal(values, log.values[recorded_row(log, timestamp_ms), URG_VALID])
+                assert np.array_equal(values, log.values[recorded_row(log, timestamp_ms)])
         finally:
             laser.close()
-    centre_values = {int(log.values[row, 384]) for row in seen_rows}
+    centre_values = {int(log.values[row, URG_FRONT]) for row in seen_rows}
     assert len(seen_rows) >= 8
     assert centre_values == {2500, 1}  # both the clear target and the smoke error came through
 
