@@ -3,7 +3,8 @@
 `grab` runs `rawlog-grabber` with one sensor section (the driver thread runs
 until a key arrives on its stdin, then the log is written and it exits 0);
 `export_2d_scans` turns a .rawlog into arrays through `rawlog-edit
---export-2d-scans-txt`; `icp_slam` runs `icp-slam` on a rawlog and reads the
+--export-2d-scans-txt`; `carmen_to_rawlog` turns a CARMEN log into a rawlog
+(`carmen2rawlog`); `icp_slam` runs `icp-slam` on a rawlog and reads the
 path it writes (`log_estimated_path.txt`: one `step x y yaw` line per
 observation) and its final point map.
 """
@@ -124,6 +125,21 @@ def export_2d_scans(rawlog: Path, label: str) -> ExportedScans:
         raise MrptError(f"{export}: expected `time ranges... flags...` rows, got shape {rows.shape}")
     count = (rows.shape[1] - 1) // 2
     return ExportedScans(rows[:, 0], rows[:, 1:1 + count], rows[:, 1 + count:] == 1)
+
+
+def carmen_to_rawlog(carmen: Path, rawlog: Path) -> Path:
+    """`carmen2rawlog` on a CARMEN log, then `rawlog-edit --remove-label ODOMETRY`: a rawlog of its laser
+    scans alone (one icp-slam pose per scan; the odometry it writes from the log's robot poses is dropped)."""
+    converted = rawlog.with_name(f"{rawlog.stem}_with_odometry.rawlog")
+    result = subprocess.run([program("carmen2rawlog"), "-q", "-i", str(carmen), "-o", str(converted)],
+                            capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
+    if result.returncode != 0 or not converted.exists():
+        raise MrptError(f"carmen2rawlog failed ({result.returncode}) on {carmen}:\n{result.stdout[-2000:]}{result.stderr[-2000:]}")
+    result = subprocess.run([program("rawlog-edit"), "--remove-label", "ODOMETRY", "-i", str(converted), "-o", str(rawlog)],
+                            capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
+    if result.returncode != 0 or not rawlog.exists():
+        raise MrptError(f"rawlog-edit --remove-label failed ({result.returncode}):\n{result.stdout[-2000:]}{result.stderr[-2000:]}")
+    return rawlog
 
 
 # icp-slam's own demo (share/mrpt/config_files/icp-slam/icp-slam_demo_classic.ini) with
