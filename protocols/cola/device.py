@@ -38,6 +38,7 @@ from protocols.cola.values import (
 )
 
 TIME_EPSILON_S = 1e-9
+CATCH_UP_S = 0.5  # a stream woken late sends the scans it missed over this long (the newest of them)
 CLOCK_BASE = datetime.datetime(2000, 1, 1)  # the unit's clock at power-on (it has no battery-backed clock)
 
 # Sopas error codes (the `sFA` answer): SICK's numbering, as sick_scan_xd and pysicktim list them.
@@ -253,6 +254,8 @@ class ColaDevice:
         return outputs
 
     def poll(self, now: float) -> list[Output]:
+        """The scans measured since the last one sent, each in its own telegram (a late wake-up sends the
+        ones it missed over the last CATCH_UP_S; of a longer gap, those)."""
         stream = self._session.stream
         unit = self.unit
         if stream is None or not unit.settings.measuring:
@@ -260,11 +263,15 @@ class ColaDevice:
         latest = unit.scan_index(now)
         if stream.next_index > latest:
             return []
-        index = latest  # a client that fell behind gets the newest scan, as a unit's buffer does
         interval = max(1, unit.settings.interval)
-        stream.next_index = (index // interval + 1) * interval
-        payload = b"sSN LMDscandata " + self._scandata(index, unit.scan_time(index), stream.dialect)
-        return [_output(frame(payload, stream.dialect), droppable=True)]
+        first = max(stream.next_index, latest - int(CATCH_UP_S / unit.period_s) + 1)
+        first = -(-first // interval) * interval
+        outputs = []
+        for index in range(first, latest + 1, interval):
+            payload = b"sSN LMDscandata " + self._scandata(index, unit.scan_time(index), stream.dialect)
+            outputs.append(_output(frame(payload, stream.dialect), droppable=True))
+        stream.next_index = (latest // interval + 1) * interval
+        return outputs
 
     def next_deadline(self) -> float | None:
         stream = self._session.stream

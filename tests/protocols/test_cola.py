@@ -12,6 +12,7 @@ import struct
 from dataclasses import dataclass
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -296,7 +297,10 @@ def test_streamed_telegrams_come_once_per_scan_in_the_dialect_asked():
     fields = decode_scandata(telegrams[0][8:-1], Dialect.BINARY)
     assert fields["scan"] == 1 and fields["channels"]["DIST1"][4][:3] == [1000, 1001, 1002]
     assert streamed(dev, 0.1) == []
-    assert len(streamed(dev, 0.5)) == 1  # a client that fell behind gets the newest scan
-    assert dev.next_deadline() == 8 / 15
+    late = [decode_scandata(data[8:-1], Dialect.BINARY)["scan"] for data in streamed(dev, 0.2)]
+    assert late == [2, 3]  # a late wake-up sends the scans it missed
+    far = [decode_scandata(data[8:-1], Dialect.BINARY)["scan"] for data in streamed(dev, 1.5)]
+    assert far == list(range(16, 23))  # those of the last 0.5 s: further behind, the newest ones
+    assert dev.next_deadline() == pytest.approx(23 / 15)
     dev.connection_lost()
     assert dev.next_deadline() is None
