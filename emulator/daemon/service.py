@@ -47,7 +47,8 @@ from emulator.scene.live import ClockChange, LiveEvent, LiveState, event_record
 from emulator.scene.endpoints import Address, PtyAddress, Rfc2217Address, plan_endpoints
 from emulator.scene.model import Scene, SensorSpec
 from emulator.scene.sick_models import MODELS as SICK_MODELS
-from emulator.sensors import create_sensor, urg04lx
+from emulator.sensors import create_sensor, hokuyo_model
+from emulator.sensors.hokuyo import revolution_phase_ms
 from emulator.sensors.scan import Scan
 from emulator.transport.pty import PtyEndpoint
 from emulator.transport.rfc2217 import Rfc2217Endpoint
@@ -57,10 +58,13 @@ from protocols.device import Device, Output
 from protocols.cola import ColaDevice, ColaUnit, UnitModel
 from protocols.lms2xx import Lms200Device
 from protocols.scip import UrgDevice
+from protocols.scip.profiles import PROFILES as SCIP22_PROFILES
+from protocols.scip.scip22 import Scip22Device
 
 # the SensorSpec options each protocol device takes (docs/scene-format.md)
 DEVICE_OPTIONS: dict[str, tuple[str, ...]] = {
     "urg-04lx": ("serial", "boot_protocol", "timing"),
+    **{model: ("serial",) for model in SCIP22_PROFILES},
     "lms200": ("baud", "type_string", "angle_deg", "resolution_deg", "units", "firmware_profile"),
     **{name: ("scan_frequency_hz", "resolution_deg", "serial", "fog_filter") for name in SICK_MODELS},
 }
@@ -95,7 +99,7 @@ def simulated_sensors(scene: Scene, world: World | None = None) -> SensorFactory
 def build_device(spec: SensorSpec, scans: Callable[..., Scan], *, phase_ms: int = 0) -> Device:
     """The protocol device for the sensor's model, configured from its scene options.
     It powers on at simulated time 0: a URG stamp is the scan's simulated time in ms;
-    a URG's revolutions complete `phase_ms` past each 100 ms."""
+    a Hokuyo's revolutions complete `phase_ms` past each period."""
     if spec.model not in DEVICE_OPTIONS:
         raise UserError(f"sensor {spec.name!r}: no protocol for model {spec.model!r}")
     options = {key: spec.options[key] for key in DEVICE_OPTIONS[spec.model] if key in spec.options}
@@ -103,6 +107,8 @@ def build_device(spec: SensorSpec, scans: Callable[..., Scan], *, phase_ms: int 
         return UrgDevice(scans, **options, phase_ms=phase_ms)
     if spec.model in SICK_MODELS:
         return ColaDevice(scans, cola_unit(spec, scans))
+    if spec.model in SCIP22_PROFILES:
+        return Scip22Device(scans, spec.model, **options, phase_ms=phase_ms)
     return Lms200Device(scans, **options)
 
 
@@ -440,11 +446,12 @@ class Daemon:
             self._timer.call_later(delay, start)
 
     def _phase_ms(self, spec: SensorSpec) -> int:
-        """A simulated URG's revolution phase in its scene (a supplied scan source keeps phase 0: a replay's
+        """A simulated Hokuyo's revolution phase in its scene (a supplied scan source keeps phase 0: a replay's
         scans lie where they were recorded)."""
-        if self._sensor_factory is not None or spec.model != urg04lx.MODEL:
+        model = hokuyo_model(spec.model)
+        if self._sensor_factory is not None or model is None:
             return 0
-        return urg04lx.revolution_phase_ms(self.scene, spec.name)
+        return revolution_phase_ms(self.scene, spec.name, model)
 
     def _origin(self, spec: SensorSpec, position: int) -> str:
         """Where an endpoint was asked for: `--endpoint urg` or `x.toml: sensors[0].endpoints[1]`."""

@@ -59,7 +59,10 @@ BUNDLED_PACKAGE = "emulator.bundled_scenes"
 SCENE_SUFFIX = ".toml"
 
 SCENE_MODELS = ("formsma2011", "physical")
-SENSOR_MODELS = ("urg-04lx", "lms200", *SICK_MODELS)
+SCIP22_MODELS = ("utm-30lx", "utm-30lx-ew", "ust-10lx", "ust-20lx")
+SENSOR_MODELS = ("urg-04lx", *SCIP22_MODELS, "lms200", *SICK_MODELS)
+# Ethernet Hokuyos: `tcp:HOST` without a port means the unit's own port (docs/scene-format.md).
+DEFAULT_TCP_PORTS = {"utm-30lx-ew": 10940, "ust-10lx": 10940, "ust-20lx": 10940}
 SHAPE_KEYS = ("box", "sphere", "cylinder", "mesh")
 ORIGIN: Vec3 = (0.0, 0.0, 0.0)
 
@@ -85,7 +88,11 @@ MATERIAL_KEYS = tuple(field.name for field in dataclasses.fields(Material))
 URG_OPTION_KEYS = ("boot_protocol", "serial", "timing")
 LMS_OPTION_KEYS = ("baud", "angle_deg", "resolution_deg", "units", "type_string", "firmware_profile")
 COLA_OPTION_KEYS = ("scan_frequency_hz", "resolution_deg", "serial", "fog_filter")
-OPTION_KEYS = {"urg-04lx": URG_OPTION_KEYS, "lms200": LMS_OPTION_KEYS, **{name: COLA_OPTION_KEYS for name in SICK_MODELS}}
+SCIP22_OPTION_KEYS = ("serial",)
+OPTION_KEYS = {
+    "urg-04lx": URG_OPTION_KEYS, **{model: SCIP22_OPTION_KEYS for model in SCIP22_MODELS}, "lms200": LMS_OPTION_KEYS,
+    **{name: COLA_OPTION_KEYS for name in SICK_MODELS},
+}
 SENSOR_KEYS = tuple(dict.fromkeys(
     ("name", "model", "body", "position", "rotation_deg", "endpoints", *URG_OPTION_KEYS, *LMS_OPTION_KEYS, *COLA_OPTION_KEYS)
 ))
@@ -611,7 +618,7 @@ def _endpoint_address(text: str, place: _Place) -> Address:
         raise place.error(f"expected {ENDPOINT_SYNTAX}, got {_show(text)}") from None
 
 
-def _endpoints(table: _Table, claims: EndpointClaims, sensor: str) -> tuple[str, ...]:
+def _endpoints(table: _Table, claims: EndpointClaims, sensor: str, default_port: int | None = None) -> tuple[str, ...]:
     place = table.place.key("endpoints")
     raw = table.raw("endpoints", [])
     if not isinstance(raw, list):
@@ -621,7 +628,7 @@ def _endpoints(table: _Table, claims: EndpointClaims, sensor: str) -> tuple[str,
     endpoints = []
     for position, item in enumerate(raw):
         item_place = place.index(position)
-        text = _as_string(item, item_place)
+        text = _with_default_port(_as_string(item, item_place), default_port)
         address = _endpoint_address(text, item_place)
         clash = claims.claim(address, sensor)
         if clash is not None:
@@ -630,6 +637,22 @@ def _endpoints(table: _Table, claims: EndpointClaims, sensor: str) -> tuple[str,
             raise item_place.error(f"endpoint {_show(text)} already used by sensor {_show(owner)}{spelled}")
         endpoints.append(text)
     return tuple(endpoints)
+
+
+def _with_default_port(text: str, default_port: int | None) -> str:
+    """`tcp:HOST` as `tcp:HOST:PORT` with the unit's own port (an Ethernet Hokuyo's 10940)."""
+    if default_port is None or not text.startswith("tcp:"):
+        return text
+    host = text[len("tcp:"):]
+    bare = host and (":" not in host or (host.startswith("[") and host.endswith("]")))
+    return f"{text}:{default_port}" if bare else text
+
+
+def _scip22_options(table: _Table) -> dict[str, Any]:
+    """The SCIP 2.2 Hokuyos: their serial number (VV SERI); the rest is the model's."""
+    if "serial" not in table:
+        return {}
+    return {"serial": table.ascii_text("serial", "", max_chars=URG_SERIAL_MAX_CHARS, forbidden=";")}
 
 
 def _urg_options(table: _Table) -> dict[str, Any]:
@@ -701,8 +724,15 @@ def _sensors(tables: list[_Table], bodies: tuple[Body, ...]) -> tuple[SensorSpec
         foreign = next((key for key in SENSOR_KEYS if key in table and _option_of(key, model)), None)
         if foreign:
             raise table.place.key(foreign).error(f"is an option of {_option_of(foreign, model)}, not of {model}")
-        options = _urg_options(table) if model == "urg-04lx" else _lms_options(table) if model == "lms200" else _cola_options(table, model)
-        endpoints = _endpoints(table, claims, name)
+        if model == "urg-04lx":
+            options = _urg_options(table)
+        elif model == "lms200":
+            options = _lms_options(table)
+        elif model in SCIP22_MODELS:
+            options = _scip22_options(table)
+        else:
+            options = _cola_options(table, model)
+        endpoints = _endpoints(table, claims, name, DEFAULT_TCP_PORTS.get(model))
         body = _body_of(table, bodies)
         sensors.append(SensorSpec(name, model, table.pose(), endpoints, MappingProxyType(options), body))
     return tuple(sensors)

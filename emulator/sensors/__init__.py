@@ -9,14 +9,25 @@ from emulator.optics import World
 from emulator.scene.model import Scene
 from emulator.scene import sick_models
 from emulator.sensors import lms200, sick_cola, urg04lx
+from emulator.sensors.hokuyo import HokuyoSensor
+from emulator.sensors.hokuyo_models import HOKUYO_MODELS, HokuyoModel
 from emulator.sensors.lms200 import LmsSensor
 from emulator.sensors.sick_cola import ColaSensor
 from emulator.sensors.scan import Scan
 from emulator.sensors.urg04lx import UrgSensor
 
-Sensor = UrgSensor | LmsSensor | ColaSensor
+Sensor = HokuyoSensor | LmsSensor | ColaSensor
+MODELS = (*HOKUYO_MODELS, lms200.MODEL, *sick_models.NAMES)
 
-__all__ = ["ColaSensor", "LmsSensor", "Scan", "Sensor", "UrgSensor", "beam_times_s", "create_sensor", "ranges_m"]
+__all__ = [
+    "HOKUYO_MODELS", "ColaSensor", "HokuyoModel", "HokuyoSensor", "LmsSensor", "MODELS", "Scan", "Sensor", "UrgSensor",
+    "beam_times_s", "create_sensor", "hokuyo_model", "ranges_m",
+]  # fmt: skip
+
+
+def hokuyo_model(model: str) -> HokuyoModel | None:
+    """The description of Hokuyo model `model`, None for a scanner of another make."""
+    return HOKUYO_MODELS.get(model)
 
 
 def create_sensor(scene: Scene, name: str, world: World | None = None) -> Sensor:
@@ -28,18 +39,21 @@ def create_sensor(scene: Scene, name: str, world: World | None = None) -> Sensor
     world = world if world is not None else World(scene)
     if spec.model == urg04lx.MODEL:
         return UrgSensor(scene, spec, world)
+    if spec.model in HOKUYO_MODELS:
+        return HokuyoSensor(scene, spec, world, HOKUYO_MODELS[spec.model])
     if spec.model == lms200.MODEL:
         return LmsSensor(scene, spec, world)
     if spec.model in sick_models.MODELS:
         return ColaSensor(scene, spec, world)
-    known = ", ".join((urg04lx.MODEL, lms200.MODEL, *sick_models.NAMES))
-    raise UserError(f"sensor {name!r}: unknown model {spec.model!r} (known: {known})")
+    raise UserError(f"sensor {name!r}: unknown model {spec.model!r} (known: {', '.join(MODELS)})")
 
 
 def beam_times_s(scan: Scan) -> np.ndarray:
-    """The simulated instant each of the scan's values was measured (its mirror's timing; ≤ `scan.time_s`)."""
-    if scan.model == urg04lx.MODEL:
-        return scan.time_s + urg04lx.angle_offsets_s(scan.angles_rad)
+    """The simulated instant each of the scan's values was measured (its mirror's timing: before the
+    stamp for a URG-04LX or LMS200, which stamp the completed scan; after it for the SCIP 2.2 Hokuyos,
+    which stamp the sweep's first step)."""
+    if scan.model in HOKUYO_MODELS:
+        return scan.time_s + HOKUYO_MODELS[scan.model].angle_offsets_s(scan.angles_rad)
     if scan.model == lms200.MODEL:
         return scan.time_s + lms200.angle_offsets_s(scan.angles_rad)
     if scan.model in sick_models.MODELS:  # at the model's power-on scan frequency
@@ -50,8 +64,8 @@ def beam_times_s(scan: Scan) -> np.ndarray:
 
 def ranges_m(scan: Scan) -> np.ndarray:
     """The scan's values in metres, NaN where the device reported an error code."""
-    if scan.model == urg04lx.MODEL:
-        return urg04lx.ranges_m(scan.values)
+    if scan.model in HOKUYO_MODELS:
+        return HOKUYO_MODELS[scan.model].ranges_m(scan.values)
     if scan.model == lms200.MODEL:
         return lms200.ranges_m(scan.values, scan.unit)
     if scan.model in sick_models.MODELS:

@@ -1,6 +1,6 @@
 """Preset `formsma2011`: the paper's rule, exactly (docs/smoke-model.md §2). Noiseless.
 
-URG-04LX: a beam whose smoke-region optical path before the solid surface
+URG-04LX (and, with their own range and codes, the other Hokuyos): a beam whose smoke-region optical path before the solid surface
 (or before 5.6 m when nothing solid is in reach: the beam dies in the smoke)
 exceeds the penetration power P = 0.0028 d × 2.5 m = 0.007 d·m (eq. 1, 2), or
 which meets a plume particle before the solid, returns error 1 (low reflected
@@ -26,20 +26,26 @@ from __future__ import annotations
 import numpy as np
 
 from emulator.optics import BeamHits
-from emulator.sensors import lms200, urg04lx
+from emulator.sensors import lms200
+from emulator.sensors.hokuyo_models import URG_04LX, HokuyoModel
 from emulator.sensors.response import Beams
 
 PENETRATION_POWER = 0.0028 * 2.5  # d·m, eq. (1)
 
 
 def urg_values(hits: BeamHits, beams: Beams) -> np.ndarray:
+    return hokuyo_values(hits, beams, URG_04LX)
+
+
+def hokuyo_values(hits: BeamHits, beams: Beams, model: HokuyoModel) -> np.ndarray:
+    """The same rule for any Hokuyo, with its own range and error codes (one echo, no intensity)."""
     extinguished = hits.region_optical_path > PENETRATION_POWER
     in_plume = np.isfinite(hits.plume_hit_range_m)
-    solid = np.isfinite(hits.solid_range_m)
+    solid = np.isfinite(hits.solid_range_m) & (hits.solid_range_m <= model.max_range_m)
     millimetres = np.rint(np.where(solid, hits.solid_range_m, 0.0) * 1000.0).astype(np.int64)
-    values = np.where(millimetres < urg04lx.MIN_VALUE_MM, urg04lx.NON_MEASURABLE, millimetres)
-    values = np.where(solid, values, urg04lx.NO_ECHO)
-    return np.where(extinguished | in_plume, urg04lx.LOW_INTENSITY, values)
+    values = np.where(millimetres < model.min_value_mm, model.non_measurable, millimetres)
+    values = np.where(solid, values, model.no_echo)
+    return np.where(extinguished | in_plume, model.low_intensity, values)
 
 
 def lms_values(hits: BeamHits, beams: Beams, unit: str, *, field_bits: int = 13) -> np.ndarray:

@@ -27,9 +27,10 @@ class Scan:
     `values` are wire values (URG: mm or an error code < 20; LMS200: distance
     in `unit` or 8183–8191), one per entry of `angles_rad` (sensor frame:
     0 = straight ahead along +x, positive to the left). `time_s` is the
-    simulated time at which the scan completed; `timestamp_ms` its
-    millisecond stamp (`emulator.sensors.beam_times_s` gives the instant each
-    value was measured: the mirror sweeps the beams one after another).
+    simulated time of the scan's stamp: when it completed (URG-04LX, LMS200)
+    or when its sweep began (the SCIP 2.2 Hokuyos stamp step 0); `timestamp_ms`
+    its millisecond stamp (`emulator.sensors.beam_times_s` gives the instant
+    each value was measured: the mirror sweeps the beams one after another).
     """
 
     sensor: str

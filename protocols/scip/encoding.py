@@ -103,3 +103,48 @@ def cluster_minimum(values: np.ndarray, cluster: int) -> np.ndarray:
     smallest = np.minimum.reduceat(keyed, np.arange(0, len(values), cluster))
     return np.where(smallest >= lift, smallest - lift, smallest)
 
+
+
+ECHO_SEPARATOR = ord("&")
+
+
+def encode_steps(ranges: np.ndarray, intensities: np.ndarray | None, width: int = 3) -> bytes:
+    """Per step its echoes, nearest first: range (+ intensity) in `width` characters each;
+    every echo after a step's first is prefixed by '&' (SCIP 2.2 HD/HE/ND/NE).
+
+    `ranges` is (N,) for one echo per step or (N, E) with -1 where a step has fewer
+    than E echoes (its first echo is always sent: an error code when nothing came
+    back). The '&' characters are data like any other: `data_lines` cuts the result
+    into 64-character lines, so an echo may straddle two lines.
+    """
+    ranges = np.asarray(ranges, dtype=np.int64)
+    if ranges.ndim == 1:
+        ranges = ranges[:, None]
+    fields = [ranges] if intensities is None else [ranges, np.asarray(intensities, dtype=np.int64).reshape(ranges.shape)]
+    steps, echoes = ranges.shape
+    group = width * len(fields)
+    slot = np.empty((steps, echoes, 1 + group), dtype=np.uint8)
+    slot[:, :, 0] = ECHO_SEPARATOR
+    for position, values in enumerate(fields):
+        chars = np.frombuffer(encode_values(values.reshape(-1), width), dtype=np.uint8).reshape(steps, echoes, width)
+        slot[:, :, 1 + position * width : 1 + (position + 1) * width] = chars
+    present = ranges >= 0
+    present[:, 0] = True
+    keep = np.repeat(present[:, :, None], 1 + group, axis=2)
+    keep[:, 0, 0] = False  # no '&' before a step's first echo
+    return slot[keep].tobytes()
+
+
+def cluster_choice(values: np.ndarray, cluster: int) -> np.ndarray:
+    """Index of the step `cluster_minimum` reports in each run of `cluster` steps: the
+    nearest distance, or when the run holds only error codes its smallest code (the
+    step whose intensity and further echoes go with it)."""
+    values = np.asarray(values, dtype=np.int64)
+    if cluster <= 1:
+        return np.arange(len(values))
+    lift = np.int64(1) << 40
+    keyed = np.where(values < ERROR_CODE_LIMIT, values + lift, values)
+    runs = -(-len(values) // cluster)
+    padded = np.full(runs * cluster, np.iinfo(np.int64).max, dtype=np.int64)
+    padded[: len(values)] = keyed
+    return np.arange(runs) * cluster + padded.reshape(runs, cluster).argmin(axis=1)

@@ -26,8 +26,9 @@ class ScanRequest:
     count: int = 1  # 0 = unlimited
 
 
-def parse_scan_request(params: bytes, *, streaming: bool) -> ScanRequest | bytes:
-    """The request in `params` (exact length already checked), or a status."""
+def parse_scan_request(params: bytes, *, streaming: bool, max_step: int = MAX_STEP) -> ScanRequest | bytes:
+    """The request in `params` (exact length already checked), or a status; `max_step` is the
+    last step the unit accepts (URG-04LX 768, SCIP 2.2 units their AMAX)."""
     fields = [(params[0:4], b"01"), (params[4:8], b"02"), (params[8:10], b"03")]
     if streaming:
         fields += [(params[10:11], b"06"), (params[11:13], b"07")]
@@ -35,7 +36,7 @@ def parse_scan_request(params: bytes, *, streaming: bool) -> ScanRequest | bytes
         if not digits.isdigit():
             return status
     start, end, cluster = int(params[0:4]), int(params[4:8]), int(params[8:10])
-    if end > MAX_STEP:
+    if end > max_step:
         return b"04"
     if end < start:
         return b"05"

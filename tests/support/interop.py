@@ -76,6 +76,27 @@ model = "lms200"
 position = [0.0, 0.0, 0.45]
 endpoints = ["pty:{folder}/scene-ttyLMS"]
 """,
+    "ust": """
+[[sensors]]
+name = "ust"
+model = "ust-10lx"
+position = [0.0, 0.0, 0.3]
+endpoints = ["pty:{folder}/scene-ttyUST"]
+""",
+    "utm": """
+[[sensors]]
+name = "utm"
+model = "utm-30lx-ew"
+position = [0.0, 0.0, 0.3]
+endpoints = ["pty:{folder}/scene-ttyUTM"]
+""",
+    "utm-usb": """
+[[sensors]]
+name = "utm"
+model = "utm-30lx"
+position = [0.0, 0.0, 0.3]
+endpoints = ["pty:{folder}/scene-ttyUTM"]
+""",
 }
 
 

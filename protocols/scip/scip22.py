@@ -1,0 +1,429 @@
+"""`Scip22Device`: a UTM-30LX, UTM-30LX-EW, UST-10LX or UST-20LX speaking SCIP 2.2.
+
+A sans-I/O state machine like `UrgDevice`: bytes and simulated time in, whole
+messages out. What differs from the URG-04LX (docs/scip.md):
+
+- commands are answered when they arrive (no 100 ms command cycle);
+- the mirror turns in `period_ms` (25 ms); scan k's sweep starts at
+  phase + k · period, and its time stamp is that instant (the SCIP 2.0
+  specification: "a timer value at 0th step of every scan"). Its data leave
+  when the mirror has swept the last requested step:
+  start + period · end / ARES;
+- GE/ME add each step's intensity (3 + 3 characters); HD/HE/ND/NE send up to
+  three echoes per step, each further echo prefixed by '&'; a unit without
+  multi-echo (UTM-30LX) answers them 0E, like every command it lacks;
+- TM1 answers in any state (urg_stamped's urg_sim, written against real
+  units); TM0 while streaming and BM/QT in time-adjust mode are refused 10.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from protocols.device import Output
+from protocols.scip.encoding import checksum, cluster_choice, data_lines, encode_steps, encode_values
+from protocols.scip.framing import Line, LineSplitter
+from protocols.scip.profiles import PROFILES, ScipProfile
+from protocols.scip.requests import SCAN_PARAMETER_CHARS, STREAM_PARAMETER_CHARS, ScanRequest, parse_scan_request
+
+TIMER_MODULUS = 1 << 24
+MAX_TAG_CHARS = 16
+TAG_CHARS = frozenset(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789 ._+@")
+MAX_BACKLOG_SCANS = 10  # a poll that comes very late streams only the newest scans
+MAX_QUEUED_REPLIES = 32  # replies waiting for their scan; further lines are lost (bounded under a flood)
+_EPSILON_S = 1e-9
+
+SINGLE_SCAN = frozenset({b"GD", b"GS", b"GE", b"HD", b"HE"})
+STREAMING = frozenset({b"MD", b"MS", b"ME", b"ND", b"NE"})
+PARAMETER_CHARS = {
+    **{code: 0 for code in (b"VV", b"PP", b"II", b"BM", b"QT", b"RS", b"RT", b"RB", b"%ST", b"%SL")},
+    b"TM": 1,
+    **{code: SCAN_PARAMETER_CHARS for code in SINGLE_SCAN},
+    **{code: STREAM_PARAMETER_CHARS for code in STREAMING},
+}
+ADJUST_MODE_COMMANDS = frozenset({b"TM", b"RS", b"RT", b"RB", b"VV", b"PP", b"II", b"%ST"})
+REBOOT_CONFIRM_S = 1.0  # RB reboots when a second RB follows the first within a second
+# %ST: the state codes of the UST protocol (standby, time adjustment, single scan, multi scan, sleep)
+STANDBY, TIME_ADJUSTMENT, SINGLE_SCAN_STATE, MULTI_SCAN_STATE, SLEEP = b"000", b"002", b"003", b"004", b"005"
+
+
+class EchoScan(Protocol):
+    """What the device needs of a scan: values per step 0..AMAX, optional intensities
+    and echo lists (`emulator.sensors.scan.Scan`), and its time."""
+
+    @property
+    def values(self) -> np.ndarray: ...
+
+    @property
+    def intensities(self) -> np.ndarray | None: ...
+
+    @property
+    def echoes(self) -> np.ndarray | None: ...
+
+    @property
+    def echo_intensities(self) -> np.ndarray | None: ...
+
+    @property
+    def time_s(self) -> float: ...
+
+
+ScanSource = Callable[[float], EchoScan]
+
+
+@dataclass(frozen=True)
+class _Format:
+    """How a command's data are encoded: value width, with intensity, with every echo."""
+
+    width: int
+    intensity: bool
+    echoes: bool
+
+
+FORMATS = {
+    b"GD": _Format(3, False, False), b"MD": _Format(3, False, False),
+    b"GS": _Format(2, False, False), b"MS": _Format(2, False, False),
+    b"GE": _Format(3, True, False), b"ME": _Format(3, True, False),
+    b"HD": _Format(3, False, True), b"ND": _Format(3, False, True),
+    b"HE": _Format(3, True, True), b"NE": _Format(3, True, True),
+}  # fmt: skip
+
+
+@dataclass
+class _Stream:
+    command: bytes
+    request: ScanRequest
+    echo_prefix: bytes  # the command and parameters as received, up to the count
+    tag_suffix: bytes
+    next_index: int
+    remaining: int | None  # None while unlimited
+
+
+@dataclass(frozen=True)
+class _Pending:
+    """A reply held until `due` (a single scan's data leave when the mirror has swept them)."""
+
+    due: float
+    scan_time: float
+    build: Callable[[], bytes]
+
+
+class Scip22Device:
+    """One endpoint's virtual SCIP 2.2 Hokuyo, across the clients that connect to it.
+
+    `scan_source(t)` returns the scan whose sweep starts at t = phase + k · period
+    (its stamp). `now` is simulated seconds; the timer reads (now − epoch) in ms
+    mod 2^24, the epoch being `start_time` until RS/RT.
+    """
+
+    def __init__(
+        self,
+        scan_source: ScanSource,
+        model: str,
+        *,
+        serial: str | None = None,
+        start_time: float = 0.0,
+        phase_ms: int = 0,
+    ) -> None:
+        if model not in PROFILES:
+            raise ValueError(f"no SCIP 2.2 profile for {model!r} (known: {', '.join(PROFILES)})")
+        self.profile: ScipProfile = PROFILES[model]
+        if not 0 <= phase_ms < self.profile.period_ms:
+            raise ValueError(f"phase_ms must be 0..{self.profile.period_ms - 1}, got {phase_ms}")
+        self._scan_source = scan_source
+        self._phase_ms = phase_ms
+        self._serial = serial or self.profile.default_serial
+        self._epoch_ms = _milliseconds(start_time)
+        self._lines = LineSplitter()
+        self._pending: deque[_Pending] = deque()
+        self._last_single_scan = -1  # a GD reports a scan no earlier GD reported
+        self.lost_commands = 0
+        self._laser_on = False
+        self._adjust_mode = False
+        self._asleep = False
+        self._stream: _Stream | None = None
+        self._reboot_asked: float | None = None  # when the first RB came
+
+    # --- protocols.device.Device -------------------------------------------
+
+    @property
+    def baud(self) -> int | None:
+        """None: USB and Ethernet are unpaced."""
+        return None
+
+    def receive(self, data: bytes, now: float) -> list[Output]:
+        outputs = self.poll(now)
+        for line in self._lines.feed(data):
+            if len(self._pending) >= MAX_QUEUED_REPLIES:
+                self.lost_commands += 1
+                continue
+            reply = self._reply(line, now)
+            if isinstance(reply, _Pending):
+                self._pending.append(reply)
+            elif self._pending:  # replies leave in command order
+                self._pending.append(_Pending(self._pending[-1].due, self._pending[-1].scan_time, lambda r=reply: r))
+            else:
+                outputs.append(Output(reply))
+        return outputs
+
+    def poll(self, now: float) -> list[Output]:
+        """Replies and streamed scans whose data have left by `now`, in time order."""
+        outputs: list[tuple[float, int, Output]] = []
+        while self._pending and self._pending[0].due <= now + _EPSILON_S:
+            item = self._pending.popleft()
+            outputs.append((item.due, len(outputs), Output(item.build())))
+        outputs += [(due, len(outputs) + i, output) for i, (due, output) in enumerate(self._stream_until(now))]
+        return [output for _, _, output in sorted(outputs, key=lambda entry: entry[:2])]
+
+    def next_deadline(self) -> float | None:
+        deadlines = [self._pending[0].due] if self._pending else []
+        if self._stream is not None:
+            deadlines.append(self._departure(self._stream.next_index, self._stream.request))
+        return min(deadlines, default=None)
+
+    def next_scan_time(self) -> float | None:
+        """The scan wanted at `next_deadline`: its sweep started earlier than its data leave."""
+        candidates = [(self._pending[0].due, self._pending[0].scan_time)] if self._pending else []
+        if self._stream is not None:
+            index = self._stream.next_index
+            candidates.append((self._departure(index, self._stream.request), self._scan_time(index)))
+        return min(candidates)[1] if candidates else None
+
+    def scan_request(self) -> dict:
+        """Nothing beyond the time: every step is measured; requests choose among them."""
+        return {}
+
+    def connection_lost(self) -> None:
+        """Streaming stops and unanswered commands are forgotten; the unit keeps its timer."""
+        self._lines.reset()
+        self._pending.clear()
+        self._stream = None
+        self._adjust_mode = False
+
+    @property
+    def laser_on(self) -> bool:
+        return self._laser_on
+
+    # --- timing ----------------------------------------------------------------
+
+    def _scan_time(self, index: int) -> float:
+        """When scan `index`'s sweep starts (a whole millisecond: its stamp)."""
+        return (index * self.profile.period_ms + self._phase_ms) / 1000
+
+    def _departure(self, index: int, request: ScanRequest) -> float:
+        """When the mirror has swept the request's last step of scan `index`."""
+        sweep = self.profile.period_ms * request.end / self.profile.steps_per_turn / 1000
+        return self._scan_time(index) + sweep
+
+    def _first_scan_from(self, now: float) -> int:
+        """The first scan whose sweep starts at or after `now`."""
+        return math.ceil(((now * 1000) - self._phase_ms) / self.profile.period_ms - _EPSILON_S)
+
+    def _timer_ms(self, now: float) -> int:
+        return (_milliseconds(now) - self._epoch_ms) % TIMER_MODULUS
+
+    # --- dispatch ----------------------------------------------------------------
+
+    def _reply(self, line: Line, now: float) -> bytes | _Pending:
+        if line.overlong:
+            return _reply(line.text, b"0B")
+        command, _, tag = line.text.partition(b";")
+        length = 3 if command.startswith(b"%") else 2
+        code, params = command[:length], command[length:]
+        has_tag = b";" in line.text
+        if code not in PARAMETER_CHARS or code not in self.profile.commands:
+            return _reply(line.text, b"0E")
+        if has_tag and len(tag) > MAX_TAG_CHARS:
+            return _reply(line.text, b"0G")
+        if has_tag and not TAG_CHARS.issuperset(tag):
+            return _reply(line.text, b"0H")
+        expected = PARAMETER_CHARS[code]
+        if len(params) < expected:
+            return _reply(line.text, b"0C")
+        if len(params) > expected:
+            return _reply(line.text, b"0D")
+        if self._adjust_mode and code not in ADJUST_MODE_COMMANDS:
+            return _reply(line.text, b"10")
+        return self._execute(code, params, line.text, b";" + tag if has_tag else b"", now)
+
+    def _execute(self, code: bytes, params: bytes, echo: bytes, tag_suffix: bytes, now: float) -> bytes | _Pending:
+        if code == b"VV":
+            return _reply(echo, b"00", self.profile.version_body(self._serial))
+        if code == b"PP":
+            return _reply(echo, b"00", self.profile.parameter_body())
+        if code == b"II":
+            body = self.profile.status_body(
+                laser_on=self._laser_on, streaming=self._stream is not None, timer_ms=self._timer_ms(now)
+            )
+            return _reply(echo, b"00", body)
+        if code == b"BM":
+            if self._laser_on:
+                return _reply(echo, b"02")
+            self._laser_on, self._asleep = True, False
+            return _reply(echo, b"00")
+        if code == b"%ST":
+            return _reply(echo, b"00", _checked(self._state_code()))
+        if code == b"%SL":
+            self._stream, self._laser_on, self._asleep = None, False, True
+            return _reply(echo, b"00")
+        if code == b"RB":
+            if self._reboot_asked is None or now - self._reboot_asked > REBOOT_CONFIRM_S:
+                self._reboot_asked = now
+                return _reply(echo, b"01")
+            self._reboot_asked = None
+            self._stream, self._laser_on, self._adjust_mode, self._asleep = None, False, False, False
+            self._epoch_ms = _milliseconds(now)
+            return _reply(echo, b"00")
+        if code == b"QT":
+            self._stream, self._laser_on = None, False
+            return _reply(echo, b"00")
+        if code in (b"RS", b"RT"):
+            self._stream, self._laser_on, self._adjust_mode, self._asleep = None, False, False, False
+            self._epoch_ms = _milliseconds(now)
+            return _reply(echo, b"00")
+        if code == b"TM":
+            return self._time_adjust(params, echo, now)
+        if code in SINGLE_SCAN:
+            return self._single_scan(code, params, echo, now)
+        return self._start_stream(code, params, echo, tag_suffix, now)
+
+    def _state_code(self) -> bytes:
+        if self._adjust_mode:
+            return TIME_ADJUSTMENT
+        if self._stream is not None:
+            return MULTI_SCAN_STATE
+        if self._laser_on:
+            return SINGLE_SCAN_STATE
+        return SLEEP if self._asleep else STANDBY
+
+    def _time_adjust(self, params: bytes, echo: bytes, now: float) -> bytes:
+        if params == b"0":
+            if self._adjust_mode:
+                return _reply(echo, b"02")
+            if self._stream is not None:
+                return _reply(echo, b"10")
+            self._adjust_mode, self._laser_on, self._asleep = True, False, False
+            return _reply(echo, b"00")
+        if params == b"1":
+            return _reply(echo, b"00", _checked(encode_values(np.array([self._timer_ms(now)]), 4)))
+        if params == b"2":
+            if not self._adjust_mode:
+                return _reply(echo, b"03")
+            self._adjust_mode = False
+            return _reply(echo, b"00")
+        return _reply(echo, b"01")
+
+    def _request(self, params: bytes, *, streaming: bool) -> ScanRequest | bytes:
+        request = parse_scan_request(params, streaming=streaming, max_step=self.profile.max_step)
+        if isinstance(request, bytes):
+            return request
+        if request.start < self.profile.first_step:
+            return b"01"
+        return request
+
+    def _single_scan(self, code: bytes, params: bytes, echo: bytes, now: float) -> bytes | _Pending:
+        request = self._request(params, streaming=False)
+        if isinstance(request, bytes):
+            return _reply(echo, request)
+        if not self._laser_on:
+            return _reply(echo, b"10")
+        index = max(self._first_scan_from(now), self._last_single_scan + 1)
+        self._last_single_scan = index
+        fmt = FORMATS[code]
+        scan_time = self._scan_time(index)
+        return _Pending(
+            self._departure(index, request),
+            scan_time,
+            lambda: _reply(echo, b"00", self._scan_body(self._scan_source(scan_time), request, fmt)),
+        )
+
+    def _start_stream(self, code: bytes, params: bytes, echo: bytes, tag_suffix: bytes, now: float) -> bytes:
+        request = self._request(params, streaming=True)
+        if isinstance(request, bytes):
+            return _reply(echo, request)
+        self._laser_on, self._asleep = True, False
+        self._stream = _Stream(
+            command=code,
+            request=request,
+            echo_prefix=code + params[:-2],
+            tag_suffix=tag_suffix,
+            next_index=self._first_scan_from(now),
+            remaining=request.count or None,
+        )
+        return _reply(echo, b"00")
+
+    # --- streaming ------------------------------------------------------------------
+
+    def _stream_until(self, now: float) -> list[tuple[float, Output]]:
+        stream = self._stream
+        if stream is None or self._departure(stream.next_index, stream.request) > now + _EPSILON_S:
+            return []
+        sweep = self._departure(0, stream.request) - self._scan_time(0)
+        latest = math.floor(((now - sweep) * 1000 - self._phase_ms) / self.profile.period_ms + _EPSILON_S)
+        period = stream.request.interval + 1
+        due = (latest - stream.next_index) // period + 1
+        self._skip(stream, max(due - MAX_BACKLOG_SCANS, 0))
+        outputs = []
+        while self._stream is stream and stream.next_index <= latest:
+            departure = self._departure(stream.next_index, stream.request)
+            outputs.append((departure, Output(self._stream_message(stream), droppable=True)))
+        return outputs
+
+    def _stream_message(self, stream: _Stream) -> bytes:
+        scan = self._scan_source(self._scan_time(stream.next_index))
+        remaining = 0 if stream.remaining is None else stream.remaining - 1
+        echo = stream.echo_prefix + b"%02d" % remaining + stream.tag_suffix
+        message = _reply(echo, b"99", self._scan_body(scan, stream.request, FORMATS[stream.command]))
+        self._skip(stream, 1)
+        return message
+
+    def _skip(self, stream: _Stream, scans: int) -> None:
+        if scans == 0:
+            return
+        stream.next_index += scans * (stream.request.interval + 1)
+        if stream.remaining is not None:
+            stream.remaining -= scans
+            if stream.remaining <= 0:
+                self._stream, self._laser_on = None, False
+
+    def _scan_body(self, scan: EchoScan, request: ScanRequest, fmt: _Format) -> bytes:
+        """Stamp line and data lines of the requested steps; a cluster reports its nearest step."""
+        steps = slice(request.start, request.end + 1)
+        values = np.asarray(scan.values, dtype=np.int64)[steps]
+        chosen = cluster_choice(values, request.cluster) + request.start
+        if fmt.echoes and scan.echoes is not None:
+            ranges = np.asarray(scan.echoes, dtype=np.int64)[chosen, : self.profile.max_echoes]
+            source, shape = scan.echo_intensities, np.asarray(scan.echoes).shape
+        else:
+            ranges = np.asarray(scan.values, dtype=np.int64)[chosen]
+            source, shape = scan.intensities, np.asarray(scan.values).shape
+        strengths = None
+        if fmt.intensity:
+            strengths = _intensity_of(source, shape)[chosen]
+            strengths = strengths[:, : ranges.shape[1]] if ranges.ndim > 1 else strengths
+        stamp = (round(scan.time_s * 1000) - self._epoch_ms) % TIMER_MODULUS
+        return _checked(encode_values(np.array([stamp]), 4)) + data_lines(encode_steps(ranges, strengths, fmt.width))
+
+
+def _intensity_of(intensities: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray:
+    """A scan's intensities, or zeros where the scan carries none."""
+    if intensities is None:
+        return np.zeros(shape, dtype=np.int64)
+    return np.asarray(intensities, dtype=np.int64)
+
+
+def _reply(echo: bytes, status: bytes, body: bytes = b"") -> bytes:
+    return echo + b"\n" + status + checksum(status) + b"\n" + body + b"\n"
+
+
+def _checked(text: bytes) -> bytes:
+    return text + checksum(text) + b"\n"
+
+
+def _milliseconds(seconds: float) -> int:
+    return math.floor(seconds * 1000 + 1e-6)
