@@ -294,3 +294,17 @@ def test_railway_has_the_sensors_other_parts_rely_on() -> None:
     assert lms.pose.position[2] == pytest.approx(0.4, abs=0.05)
     assert scene.plumes and sum(plume.rate * plume.lifetime for plume in scene.plumes) <= 400
     assert all(isinstance(item.shape, (Box, Cylinder)) for item in (*scene.objects, *scene.regions))
+
+
+def test_ethernet_hokuyos_default_to_port_10940(tmp_path):
+    from emulator.scene import load_scene
+
+    path = tmp_path / "ust.toml"
+    path.write_text(
+        '[scene]\nname = "ust"\n\n[[sensors]]\nname = "a"\nmodel = "ust-10lx"\nendpoints = ["tcp:127.0.0.1", "tcp:[::1]"]\n\n'
+        '[[sensors]]\nname = "b"\nmodel = "ust-20lx"\nserial = "H1234567"\nendpoints = ["tcp:127.0.0.2:2000"]\n'
+    )
+    scene = load_scene(path)
+    assert scene.sensor("a").endpoints == ("tcp:127.0.0.1:10940", "tcp:[::1]:10940")
+    assert scene.sensor("b").endpoints == ("tcp:127.0.0.2:2000",)
+    assert scene.sensor("b").options["serial"] == "H1234567" and "serial" not in scene.sensor("a").options

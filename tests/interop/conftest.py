@@ -31,6 +31,18 @@ def lms_room(tmp_path: Path) -> Path:
 
 
 @pytest.fixture
+def ust_room(tmp_path: Path) -> Path:
+    """The room with a UST-10LX named `ust` at the origin, 0.3 m up, looking along +x."""
+    return write_room(tmp_path, "ust")
+
+
+@pytest.fixture
+def utm_room(tmp_path: Path) -> Path:
+    """The room with a UTM-30LX-EW named `utm` at the origin, 0.3 m up, looking along +x."""
+    return write_room(tmp_path, "utm")
+
+
+@pytest.fixture
 def serve() -> Iterator[Callable[..., ServeProcess]]:
     """`serve(scene, "urg=tcp:127.0.0.1:PORT", ...)` → a running daemon; SIGTERMed afterwards."""
     started: list[ServeProcess] = []

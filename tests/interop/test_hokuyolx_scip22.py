@@ -1,0 +1,75 @@
+"""hokuyolx (PyPI, unmodified; written for the UST series) against the real daemon's
+UST-10LX and UTM-30LX-EW over TCP: identity, ranges, intensities, streaming.
+
+The UST gets hokuyolx as shipped, time sync included (%ST, TM0/TM1/TM2); the
+UTM-30LX-EW lacks the UST's %ST, so it is built with tsync=False.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hokuyolx import HokuyoLX
+from support.interop import scan_values
+
+STEPS = 1081
+
+
+def step_values(scene: Path, sensor: str, time_s: float) -> np.ndarray:
+    """The `scan` command's values of steps 0..1080 (step 540 ahead, 1440 per turn)."""
+    angles, values = scan_values(scene, sensor, time_s)
+    np.testing.assert_allclose(angles, (np.arange(STEPS) - 540) * 0.25, atol=1e-6)
+    return values
+
+
+@pytest.fixture
+def ust(serve, ust_room: Path, tcp_port: int):
+    daemon = serve(ust_room, f"ust=tcp:127.0.0.1:{tcp_port}")
+    client = HokuyoLX(addr=daemon.endpoint("ust", "tcp").address, convert_time=False)
+    yield client
+    client.close()
+
+
+@pytest.fixture
+def utm(serve, utm_room: Path, tcp_port: int):
+    daemon = serve(utm_room, f"utm=tcp:127.0.0.1:{tcp_port}")
+    client = HokuyoLX(addr=daemon.endpoint("utm", "tcp").address, tsync=False, convert_time=False)
+    yield client
+    client.close()
+
+
+def test_ust_identity_and_time_sync(ust: HokuyoLX) -> None:
+    assert (ust.model, ust.amin, ust.amax, ust.aforw, ust.ares) == ("UST-10LX", 0, 1080, 540, 1440)
+    assert (ust.dmin, ust.dmax, ust.scan_freq) == (20, 30000, 40)
+    assert ust.version()["PROT"] == "SCIP 2.2"
+    assert ust.laser_state() == (3, "Single scan state")  # hokuyolx activated it after syncing
+    assert ust.tzero != 0, "time_sync read TM1 ten times"
+
+
+def test_ust_ranges_and_intensities_equal_the_scan_command(ust: HokuyoLX, ust_room: Path) -> None:
+    stamp, ranges = ust.get_dist()
+    assert ranges.shape == (STEPS,)
+    np.testing.assert_array_equal(ranges, step_values(ust_room, "ust", stamp / 1000))
+    assert np.any(ranges < 20) and np.any(ranges >= 20)
+    stamp, pairs = ust.get_intens()
+    assert pairs.shape == (STEPS, 2)
+    np.testing.assert_array_equal(pairs[:, 0], step_values(ust_room, "ust", stamp / 1000))
+
+
+def test_ust_streams_every_25_ms(ust: HokuyoLX) -> None:
+    received = list(ust.iter_intens(4, start=100, end=900, grouping=2))
+    assert [pending for _, _, pending in received] == [3, 2, 1, 0]
+    assert all(scan.shape == (401, 2) for scan, _, _ in received)
+    stamps = [stamp for _, stamp, _ in received]
+    assert np.all(np.diff(stamps) == 25), stamps
+
+
+def test_utm_30lx_ew_over_tcp(utm: HokuyoLX, utm_room: Path) -> None:
+    assert (utm.model, utm.dmin, utm.dmax, utm.scan_freq) == ("UTM-30LX-EW", 23, 60000, 40)
+    assert utm.sensor_state()["MESM"] == "003 Single_scan"
+    stamp, ranges = utm.get_dist()
+    np.testing.assert_array_equal(ranges, step_values(utm_room, "utm", stamp / 1000))
+    scans = list(utm.iter_dist(3))
+    assert np.all(np.diff([stamp for _, stamp, _ in scans]) == 25)
