@@ -42,7 +42,7 @@ from emulator.daemon.scan_cache import SCAN_BATCH
 from emulator.optics import World
 from emulator.scene import bundled_scenes, load_scene
 from emulator.scene.model import Scene, SensorSpec
-from emulator.sensors import Sensor, create_sensor, lms200, urg04lx
+from emulator.sensors import Sensor, create_sensor, hokuyo_model, lms200
 from emulator.sensors.beam_geometry import scan_plane_rays
 from emulator.sensors.mount import SensorMount
 from emulator.sensors.response import PRESET_MODULES, apply_model_override
@@ -77,13 +77,14 @@ def _scan_scenes() -> list[tuple[str, Scene]]:
 
 
 def _sensor_beams(scene: Scene, spec: SensorSpec, world: World) -> tuple[np.ndarray, np.ndarray, float]:
-    """Origins, directions and cast range of one scan of the sensor (valid URG steps; the LMS's window),
+    """Origins, directions and cast range of one scan of the sensor (a Hokuyo's valid steps; the LMS's window),
     from its pose at t = 0 (a sensor on a moving body: where the body starts)."""
     pose = SensorMount(scene, spec, world.bodies).frames(np.zeros(1)).at(0)
-    if spec.model == urg04lx.MODEL:
-        angles = urg04lx.step_angles_rad()[urg04lx.FIRST_VALID_STEP : urg04lx.LAST_VALID_STEP + 1]
+    hokuyo = hokuyo_model(spec.model)
+    if hokuyo is not None:
+        angles = hokuyo.step_angles_rad()[hokuyo.valid_steps]
         origins, directions = scan_plane_rays(pose, angles)
-        return origins, directions, urg04lx.MAX_RANGE_M
+        return origins, directions, hokuyo.max_range_m
     window = lms200.configured_window(spec.options)
     angles = np.radians(lms200.device_angles_deg(window["start_deg"], window["step_deg"], window["count"]) - 90.0)
     origins, directions = scan_plane_rays(pose, angles)

@@ -1,4 +1,4 @@
-"""`lrf-emulator replay LOG --device urg-04lx|lms200 [--endpoint URI]...`, and `replay FILE.mcap --topic T --device ...`: a LaserScan topic of an MCAP file
+"""`lrf-emulator replay LOG --device MODEL [--endpoint URI]...`, and `replay FILE.mcap --topic T --device ...`: a LaserScan topic of an MCAP file
 (a ROS 2 bag or a Foxglove recording; emulator/recording/mcap_replay.py).
 
 Serves a recorded log (from `record`, or a real sensor's log in the same
@@ -30,8 +30,8 @@ from emulator.recording.textlog import Log, read_log
 from emulator.scene.model import Pose, Scene, SensorSpec
 
 MCAP_MAGIC = b"\x89MCAP"
-DEFAULT_ENDPOINTS = {URG_MODEL: "tcp:127.0.0.1:10940", LMS_MODEL: "pty:ttyLMS0"}
-DEFAULT_NAMES = {URG_MODEL: "urg", LMS_MODEL: "lms"}
+DEFAULT_ENDPOINTS = {**{model: "tcp:127.0.0.1:10940" for model in MODELS if model != LMS_MODEL}, LMS_MODEL: "pty:ttyLMS0"}
+DEFAULT_NAMES = {URG_MODEL: "urg", "utm-30lx": "utm", "utm-30lx-ew": "utm", "ust-10lx": "ust", "ust-20lx": "ust", LMS_MODEL: "lms"}
 LMS_WINDOWS = {(180, 1.0), (180, 0.5), (100, 1.0), (100, 0.5), (100, 0.25)}
 
 
@@ -43,7 +43,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--device", dest="model", required=True, choices=MODELS, help="the device to serve the log as")
     parser.add_argument(
         "--endpoint", action="append", default=[], metavar="URI",
-        help="pty:PATH or tcp:HOST:PORT (repeatable; default: urg-04lx tcp:127.0.0.1:10940, lms200 pty:ttyLMS0)",
+        help="pty:PATH or tcp:HOST:PORT (repeatable; default: a Hokuyo tcp:127.0.0.1:10940, lms200 pty:ttyLMS0)",
     )
 
 

@@ -25,7 +25,7 @@ from emulator.sensors.lms200 import PERIOD_S as LMS_REVOLUTION_S
 from emulator.sensors.lms200 import REVOLUTIONS_PER_SCAN, configured_window
 from emulator.sensors.scan import Scan
 from emulator.sensors.scan_json import scan_json
-from emulator.sensors.urg04lx import PERIOD_S as URG_PERIOD_S
+from emulator.sensors import hokuyo_model
 
 Subscriber = Callable[[str], None]  # gets each scan message, serialized
 
@@ -36,10 +36,12 @@ def configured_request(spec: SensorSpec) -> dict[str, Any]:
 
 
 def configured_period_s(spec: SensorSpec) -> float:
-    """The time one configured scan takes: 0.1 s (URG-04LX); 1, 2 or 4 mirror revolutions (LMS200)."""
-    if spec.model == "lms200":
-        return REVOLUTIONS_PER_SCAN[configured_window(spec.options)["step_deg"]] * LMS_REVOLUTION_S
-    return URG_PERIOD_S
+    """The time one configured scan takes: a Hokuyo's revolution (0.1 s URG-04LX, 25 ms the others);
+    1, 2 or 4 mirror revolutions (LMS200)."""
+    hokuyo = hokuyo_model(spec.model)
+    if hokuyo is not None:
+        return hokuyo.period_s
+    return REVOLUTIONS_PER_SCAN[configured_window(spec.options)["step_deg"]] * LMS_REVOLUTION_S
 
 
 class ScanFeed:

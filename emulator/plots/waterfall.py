@@ -27,7 +27,7 @@ from emulator.errors import UserError
 from emulator.optics import World
 from emulator.plots.output import save_figure
 from emulator.scene import Scene
-from emulator.sensors import Scan, create_sensor, ranges_m
+from emulator.sensors import Scan, create_sensor, hokuyo_model, ranges_m
 from emulator.sensors.beam_geometry import scan_plane_rays
 from emulator.sensors.series import scan_series, scan_times
 
@@ -35,10 +35,9 @@ SATURATION_CLEAR = 0.8
 SATURATION_PER_DENSITY = math.log(0.8 / 0.14) / 0.0028  # ≈ 622 per density unit
 SATURATION_NOTE = "camera saturation s = 0.8·exp(−622·density): an assumption fitted to 0.0028 ↔ 0.14"
 
-CAST_RANGE_M = {"urg-04lx": 5.6, "lms200": 80.0}
+LMS_CAST_RANGE_M = 80.0
 # Codes that mean "nothing within range", shaded as the far end, not as errors.
-NO_RETURN_CODES = {"urg-04lx": (0,), "lms200": (8183, 8191)}
-URG_VALID_STEPS = slice(44, 726)  # the URG-04LX's measurable area, steps 44..725
+LMS_NO_RETURN_CODES = (8183, 8191)
 
 ERROR_RGB = (0.86, 0.10, 0.10)
 NO_RETURN_RGB = (0.86, 0.92, 1.0)
@@ -89,8 +88,9 @@ class SensorSeries:
 
     @property
     def max_range_m(self) -> float:
-        if self.model == "urg-04lx":
-            return 5.6
+        hokuyo = hokuyo_model(self.model)
+        if hokuyo is not None:
+            return hokuyo.max_range_m
         return 8.183 if self.unit == "mm" else 81.83
 
 
@@ -108,19 +108,21 @@ def sensor_series(
         raise UserError(f"--start {start_s} to --end {end_s} holds fewer than two scans of {sensor_name}")
     computed = scan_series(sensor, times)
     scans = list(progress(computed, len(times)) if progress is not None else computed)
-    columns = URG_VALID_STEPS if spec.model == "urg-04lx" else slice(None)
+    hokuyo = hokuyo_model(spec.model)
+    columns = hokuyo.valid_steps if hokuyo is not None else slice(None)  # a Hokuyo's measurable area
     angles = np.asarray(scans[0].angles_rad)[columns]
     values = np.vstack([np.asarray(scan.values)[columns] for scan in scans]).astype(np.int64)
     ranges = np.vstack([ranges_m(scan)[columns] for scan in scans])
     is_code = np.isnan(ranges)
-    no_return = np.isin(values, NO_RETURN_CODES[spec.model]) & is_code
+    no_return = np.isin(values, hokuyo.no_return_codes if hokuyo is not None else LMS_NO_RETURN_CODES) & is_code
+    cast_range_m = hokuyo.max_range_m if hokuyo is not None else LMS_CAST_RANGE_M
     fixed_rays = None if sensor.mount.moving else scan_plane_rays(sensor.mount.fixed_spec.pose, angles)
     mean_density = np.zeros(len(times))
     plume_range = np.full(values.shape, np.inf)
     for i, time_s in enumerate(times):
         # a sensor on a moving body: the smoke along its beams from where it is at the scan's time stamp
         rays = fixed_rays or scan_plane_rays(sensor.mount.frames(np.array([time_s])).at(0), angles)
-        hits = world.cast(*rays, CAST_RANGE_M[spec.model], float(time_s))
+        hits = world.cast(*rays, cast_range_m, float(time_s))
         mean_density[i] = float(np.mean(hits.region_optical_path / hits.beam_end_m))
         plume_range[i] = hits.plume_hit_range_m
     return SensorSeries(

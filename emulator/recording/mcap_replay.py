@@ -36,11 +36,9 @@ from emulator.recording.replay_sources import (
     LMS_MODEL,
     LMS_NO_ECHO,
     LMS_REVOLUTION_S,
-    URG_MODEL,
-    URG_PERIOD_S,
     ReplayClock,
 )
-from emulator.sensors import lms200, urg04lx
+from emulator.sensors import hokuyo_model, lms200
 from emulator.sensors.scan import Scan
 
 MAX_MESSAGES = 500_000
@@ -163,14 +161,15 @@ def _resample(scans: LaserScans, grid_rad: np.ndarray) -> np.ndarray:
 
 
 class LaserScanReplay:
-    """A URG-04LX or LMS200 serving a LaserScan topic (module docstring); answers the same
+    """A Hokuyo or LMS200 serving a LaserScan topic (module docstring); answers the same
     calls as the simulated sensors."""
 
     def __init__(self, scans: LaserScans, model: str, name: str) -> None:
         self.model, self.name = model, name
-        if model == URG_MODEL:
-            self._grid = urg04lx.step_angles_rad()
-            self.period_s = URG_PERIOD_S
+        hokuyo = hokuyo_model(model)
+        if hokuyo is not None:
+            self._grid = hokuyo.step_angles_rad()
+            self.period_s = hokuyo.period_s
         elif model == LMS_MODEL:
             self._grid = np.radians(np.arange(0.0, 180.0 + LMS_GRID_STEP_DEG / 2, LMS_GRID_STEP_DEG) - 90.0)
             self.period_s = LMS_REVOLUTION_S
@@ -186,7 +185,7 @@ class LaserScanReplay:
         return ranges_to_values(self._ranges[row], self.model, unit, low, high)
 
     def scan(self, time_s: float, *, start_deg: float = 0.0, step_deg: float = 0.5, count: int = 361, unit: str = "mm") -> Scan:
-        if self.model == URG_MODEL:
+        if hokuyo_model(self.model) is not None:
             return Scan(self.name, self.model, time_s, self._grid, self._row(time_s, "mm"), "mm")
         wanted = np.radians(lms200.device_angles_deg(start_deg, step_deg, count) - 90.0)
         columns = np.clip(np.round((wanted - self._grid[0]) / np.radians(LMS_GRID_STEP_DEG)).astype(np.int64), 0, len(self._grid) - 1)

@@ -18,11 +18,12 @@ import numpy as np
 
 from emulator.errors import UserError
 from emulator.recording.textlog import Log
+from emulator.sensors.hokuyo_models import HOKUYO_MODELS, URG_04LX, HokuyoModel
 from emulator.sensors.scan import Scan
 
 URG_MODEL = "urg-04lx"
 LMS_MODEL = "lms200"
-MODELS = (URG_MODEL, LMS_MODEL)
+MODELS = (*HOKUYO_MODELS, LMS_MODEL)
 
 URG_STEPS = 769
 URG_FRONT_STEP = 384
@@ -51,23 +52,23 @@ class ReplayClock:
         return max(0, int(np.searchsorted(self._times, offset + 5e-4, side="right")) - 1)
 
 
-class UrgReplay:
-    """A URG-04LX serving a log's scans: 769 values for steps 0..768."""
+class HokuyoReplay:
+    """A Hokuyo serving a log's scans: one value per step (a step the log lacks: "no object in range")."""
 
-    model = URG_MODEL
-    period_s = URG_PERIOD_S
-
-    def __init__(self, log: Log, name: str = "urg") -> None:
-        _check_model(log, URG_MODEL)
-        steps = np.round(log.angles_rad / URG_STEP_RAD).astype(np.int64) + URG_FRONT_STEP
-        off_grid = np.abs((steps - URG_FRONT_STEP) * URG_STEP_RAD - log.angles_rad) > ANGLE_TOLERANCE_RAD
-        if np.any(off_grid) or np.any((steps < 0) | (steps >= URG_STEPS)):
-            raise UserError("log angles are not URG-04LX steps (0..768, 2π/1024 rad apart, 0 = step 384)")
-        self.name = name
-        self._clock = ReplayClock(log.times_s, URG_PERIOD_S)
-        self._values = np.full((len(log.values), URG_STEPS), URG_NO_ECHO, dtype=np.int64)
+    def __init__(self, log: Log, name: str = "urg", model: HokuyoModel = URG_04LX) -> None:
+        _check_model(log, model.name)
+        steps = np.round(log.angles_rad / model.step_rad).astype(np.int64) + model.front_step
+        off_grid = np.abs((steps - model.front_step) * model.step_rad - log.angles_rad) > ANGLE_TOLERANCE_RAD
+        if np.any(off_grid) or np.any((steps < 0) | (steps >= model.steps)):
+            raise UserError(
+                f"log angles are not {model.name} steps (0..{model.steps - 1}, 2π/{model.steps_per_turn} rad apart,"
+                f" 0 = step {model.front_step})"
+            )
+        self.name, self.model, self.period_s = name, model.name, model.period_s
+        self._clock = ReplayClock(log.times_s, model.period_s)
+        self._values = np.full((len(log.values), model.steps), model.no_echo, dtype=np.int64)
         np.put_along_axis(self._values, steps, log.values, axis=1)
-        self._angles = (np.arange(URG_STEPS) - URG_FRONT_STEP) * URG_STEP_RAD
+        self._angles = model.step_angles_rad()
 
     def scan(self, time_s: float) -> Scan:
         values = self._values[self._clock.row_at(time_s)]
@@ -145,10 +146,10 @@ def _check_model(log: Log, model: str) -> None:
         raise UserError(f"the log was recorded from a {log.header.model}, not a {model}")
 
 
-def replay_sensor(log: Log, model: str, name: str) -> UrgReplay | LmsReplay:
-    """The replaying sensor for `model` ("urg-04lx" or "lms200")."""
-    if model == URG_MODEL:
-        return UrgReplay(log, name)
+def replay_sensor(log: Log, model: str, name: str) -> HokuyoReplay | LmsReplay:
+    """The replaying sensor for `model` (a Hokuyo's or "lms200")."""
+    if model in HOKUYO_MODELS:
+        return HokuyoReplay(log, name, HOKUYO_MODELS[model])
     if model == LMS_MODEL:
         return LmsReplay(log, name)
     raise UserError(f"unknown model {model!r} (use {' or '.join(MODELS)})")

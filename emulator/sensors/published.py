@@ -22,7 +22,8 @@ import numpy as np
 
 from emulator.scene import sick_models
 from emulator.scene.sick_models import FREQUENCY_TICKS_PER_HZ, SickModel
-from emulator.sensors import lms200, urg04lx
+from emulator.sensors import lms200
+from emulator.sensors.hokuyo_models import HOKUYO_MODELS, HokuyoModel
 from emulator.sensors.scan import Scan
 
 ANGLE_SLACK_RAD = 1e-6  # a beam on the range's edge is in it (angles computed two ways)
@@ -77,28 +78,30 @@ def _cola_publication(sick: SickModel) -> Publication:
     )
 
 
-def _urg_step_rad(step: int) -> float:
-    return (step - urg04lx.FRONT_STEP) * 2.0 * math.pi / urg04lx.STEPS_PER_REVOLUTION
+def _hokuyo_publication(hokuyo: HokuyoModel) -> Publication:
+    """A Hokuyo publishes its measured steps AMIN..AMAX, DMIN..DMAX in mm (urg_node reads both from PP)."""
+    angles = hokuyo.step_angles_rad()
+    return Publication(
+        model=hokuyo.name,
+        driver="urg_node (ROS 1 and ROS 2), urg_node2",
+        measured_rad=(float(angles[hokuyo.first_valid_step]), float(angles[hokuyo.last_valid_step])),
+        revolution_s=hokuyo.period_s,
+        revolutions={},
+        range_min_m=hokuyo.min_value_mm / 1000.0,
+        range_max_m={"mm": hokuyo.max_range_m},
+        units_per_m={"mm": 1000.0},
+        distances=(hokuyo.min_value_mm, hokuyo.max_value_mm),
+        no_return=(hokuyo.no_echo,),
+        too_close=(hokuyo.non_measurable,),
+        replay_codes=(hokuyo.no_echo, hokuyo.non_measurable, hokuyo.low_intensity),
+        above_maximum=hokuyo.no_echo,
+    )
 
 
 PUBLICATIONS: dict[str, Publication] = {
     publication.model: publication
     for publication in (
-        Publication(
-            model=urg04lx.MODEL,
-            driver="urg_node (ROS 1 and ROS 2), urg_node2",
-            measured_rad=(_urg_step_rad(urg04lx.FIRST_VALID_STEP), _urg_step_rad(urg04lx.LAST_VALID_STEP)),
-            revolution_s=urg04lx.PERIOD_S,
-            revolutions={},
-            range_min_m=urg04lx.MIN_VALUE_MM / 1000.0,
-            range_max_m={"mm": urg04lx.MAX_RANGE_M},
-            units_per_m={"mm": 1000.0},
-            distances=(urg04lx.MIN_VALUE_MM, round(urg04lx.MAX_RANGE_M * 1000)),
-            no_return=(urg04lx.NO_ECHO,),
-            too_close=(urg04lx.NON_MEASURABLE,),
-            replay_codes=(urg04lx.NO_ECHO, urg04lx.NON_MEASURABLE, urg04lx.LOW_INTENSITY),
-            above_maximum=urg04lx.NO_ECHO,
-        ),
+        *(_hokuyo_publication(hokuyo) for hokuyo in HOKUYO_MODELS.values()),
         Publication(
             model=lms200.MODEL,
             driver="sicktoolbox_wrapper's sicklms (ROS 1)",

@@ -40,6 +40,7 @@ from emulator.recording.world_snapshot import SceneSnapshots, WorldSnapshot
 from emulator.scene.bodies import Live
 from emulator.scene.model import Box, Cylinder, Pose, Scene, Shape, Sphere
 from emulator.scene.geometry import shape_mesh
+from emulator.sensors import hokuyo_model
 from emulator.sensors.published import published
 from emulator.sensors.scan import Scan
 from emulator.view.control_client import ControlClient, ControlError
@@ -52,7 +53,8 @@ ERROR_RING_M = 0.3
 ERROR_RGB = (230, 20, 20)
 SCAN_POINT_SIZE = 0.05
 GIZMO_SCALE_M = 1.2  # arrow length; its plane handles sit at 0.14..0.37 of it
-MAX_RANGE_FOR_COLOUR_M = {"urg-04lx": 5.6, "lms200": 20.0}
+LMS_RANGE_FOR_COLOUR_M = 20.0
+MAX_RANGE_FOR_COLOUR_M = 20.0  # a long-range Hokuyo's 30 or 60 m would paint a room in one colour
 
 
 def _wxyz(rotation_deg: tuple[float, float, float]) -> tuple[float, float, float, float]:
@@ -81,7 +83,9 @@ def scan_points(scan: Scan, pose: Pose) -> tuple[np.ndarray, np.ndarray, np.ndar
     error = np.isnan(ranges) | (ranges == -np.inf)
     hits = origin + (local[echo] * ranges[echo, None]) @ rotation.T
     marks = origin + (local[error] * ERROR_RING_M) @ rotation.T
-    colours = range_rgb(ranges[echo], MAX_RANGE_FOR_COLOUR_M.get(scan.model, 10.0))
+    hokuyo = hokuyo_model(scan.model)
+    reach = min(hokuyo.max_range_m, MAX_RANGE_FOR_COLOUR_M) if hokuyo is not None else LMS_RANGE_FOR_COLOUR_M
+    colours = range_rgb(ranges[echo], reach)
     return hits.astype(np.float32), colours, marks.astype(np.float32)
 
 

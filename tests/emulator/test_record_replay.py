@@ -12,7 +12,7 @@ import pytest
 
 from emulator.bench.serve_load import fleet_scene_text
 from emulator.errors import UserError
-from emulator.recording.replay_sources import LmsReplay, UrgReplay, replay_sensor
+from emulator.recording.replay_sources import HokuyoReplay, LmsReplay, replay_sensor
 from emulator.recording.textlog import LogHeader, format_scan, read_log, write_log
 from emulator.scene import load_scene
 from emulator.sensors import create_sensor
@@ -163,7 +163,7 @@ def test_urg_replay_serves_the_row_recorded_at_or_before_t_and_loops(tmp_path: P
     path = tmp_path / "urg.log"
     with path.open("w") as out:
         write_log(out, scans, LogHeader("urg", "urg-04lx", "mm"))
-    replay = UrgReplay(read_log(path))
+    replay = HokuyoReplay(read_log(path))
     for k in range(25):
         scan = replay.scan(k * 0.1)
         assert scan.time_s == k * 0.1
@@ -177,7 +177,7 @@ def test_urg_replay_places_a_partial_log_on_its_steps(tmp_path: Path) -> None:
     angles = (steps - 384) * 2 * np.pi / 1024
     pairs = " ".join(f"{a:.6f} {s}" for a, s in zip(angles, steps))
     path.write_text(f"0.000 {pairs}\n")
-    values = UrgReplay(read_log(path)).scan(0.0).values
+    values = HokuyoReplay(read_log(path)).scan(0.0).values
     assert values[44:726].tolist() == steps.tolist()
     assert np.all(values[:44] == 0) and np.all(values[726:] == 0)
 
