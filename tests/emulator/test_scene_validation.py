@@ -116,9 +116,9 @@ CASES = [
     ('[[materials]]\nname = "tape"\nreflectivity = 0.9\nretroreflective = 1', 'materials[0].retroreflective: expected true or false, got 1'),
     # [[sensors]]
     ('[[sensors]]\nname = "front"', "sensors[0].model: missing required key"),
-    ('[[sensors]]\nname = "front"\nmodel = "uam-01lp"', 'sensors[0].model: must be one of "urg-04lx", "utm-30lx", "utm-30lx-ew", "ust-10lx", "ust-20lx", "lms200", got "uam-01lp"'),
+    ('[[sensors]]\nname = "front"\nmodel = "uam-01lp"', 'sensors[0].model: must be one of "urg-04lx", "utm-30lx", "utm-30lx-ew", "ust-10lx", "ust-20lx", "lms200", "tim561", "tim571", "tim781", "lms111", "lms511", got "uam-01lp"'),
     (URG + "range = 4", "sensors[0].range: unknown key (expected one of: name, model, body, position, rotation_deg, endpoints, "
-     "boot_protocol, serial, timing, baud, angle_deg, resolution_deg, units, type_string, firmware_profile)"),
+     "boot_protocol, serial, timing, baud, angle_deg, resolution_deg, units, type_string, firmware_profile, scan_frequency_hz, fog_filter)"),
     (URG + URG, 'sensors[1].name: duplicate name "urg" (also sensors[0])'),
     (URG + 'endpoints = "pty:ttyURG0"', 'sensors[0].endpoints: expected a list of endpoints, got "pty:ttyURG0"'),
     (URG + "endpoints = [10940]", "sensors[0].endpoints[0]: expected a string, got 10940"),
@@ -170,7 +170,7 @@ CASES = [
     ('[[sensors]]\nname = "u"\nmodel = "utm-30lx"\nendpoints = ["tcp:127.0.0.1"]',
      'sensors[0].endpoints[0]: expected "pty:PATH", "tcp:HOST:PORT" or "rfc2217:HOST:PORT" with PORT 0..65535, got "tcp:127.0.0.1"'),
     # lms200 options
-    (LMS + 'serial = "H0706400"', "sensors[0].serial: is an option of urg-04lx, utm-30lx, utm-30lx-ew, ust-10lx, ust-20lx, not of lms200"),
+    (LMS + 'serial = "H0706400"', "sensors[0].serial: is an option of urg-04lx, not of lms200"),
     (LMS + "baud = 115200", "sensors[0].baud: must be one of 9600, 19200, 38400, 500000, got 115200"),
     (LMS + "baud = 9600.0", "sensors[0].baud: expected an integer, got 9600.0"),
     (LMS + "angle_deg = 90", "sensors[0].angle_deg: must be one of 180, 100, got 90"),
