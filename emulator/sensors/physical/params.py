@@ -146,7 +146,7 @@ DEFAULT_PARAMS = PhysicalParams()
 
 def _hokuyo(max_echoes: int, detection: tuple[float, float], range_sigma_m: float) -> PulsedReceiver:
     return PulsedReceiver(
-        overlap_m=0.05, footprint_rad=np.radians(0.25), detection=detection, volume_gain=HOKUYO_VOLUME_GAIN,
+        overlap_m=PULSED_OVERLAP_M, footprint_rad=np.radians(0.25), detection=detection, volume_gain=HOKUYO_VOLUME_GAIN,
         max_echoes=max_echoes, separation_m=HOKUYO_SEPARATION_M, pulse_width_s=2.0 * HOKUYO_SEPARATION_M / SPEED_OF_LIGHT_M_S,
         wavelength_nm=905.0, intensity_reference=6000.0, intensity_max=65535, range_sigma_m=range_sigma_m,
     )
@@ -155,7 +155,7 @@ def _hokuyo(max_echoes: int, detection: tuple[float, float], range_sigma_m: floa
 def _sick(max_echoes: int, detection: tuple[float, float], footprint_rad: float, wavelength_nm: float, range_sigma_m: float,
           fog_filter_m: float = 0.0, rssi: tuple[float, int] = (200.0, 255)) -> PulsedReceiver:
     return PulsedReceiver(
-        overlap_m=0.05, footprint_rad=footprint_rad, detection=detection, volume_gain=SICK_VOLUME_GAIN,
+        overlap_m=PULSED_OVERLAP_M, footprint_rad=footprint_rad, detection=detection, volume_gain=SICK_VOLUME_GAIN,
         max_echoes=max_echoes, separation_m=SICK_SEPARATION_M, pulse_width_s=2.0 * SICK_SEPARATION_M / SPEED_OF_LIGHT_M_S,
         wavelength_nm=wavelength_nm, intensity_reference=rssi[0], intensity_max=rssi[1], range_sigma_m=range_sigma_m,
         fog_filter_m=fog_filter_m, fog_filter_gain=FOG_FILTER_GAIN if fog_filter_m else 1.0,
@@ -167,6 +167,7 @@ HOKUYO_SEPARATION_M = 0.6  # assumption: a 4 ns pulse (Hokuyo publishes no pulse
 SICK_SEPARATION_M = 0.75  # c × 5 ns / 2: the TiM5xx's maximum pulse duration (datasheet), taken for every SICK
 HOKUYO_VOLUME_GAIN = 400.0  # assumption, the LMS200's: β·V = 0.04, a smoke lidar ratio of π / (0.04 ρ_ref) ≈ 87 sr
 SICK_VOLUME_GAIN = 400.0  # the same
+PULSED_OVERLAP_M = 0.3  # assumption, the URG-04LX's: the first decimetres fade out (smoke at the window is not a 0 m echo)
 FOG_FILTER_GAIN = 2.6  # assumption: SICK's Dx1000 fog filter raises its minimum level from 500 to 1300 digits
 LMS1XX_DIVERGENCE_RAD = 0.015  # LMS1xx operating instructions: spot = distance × 0.015 rad + 8 mm
 LMS5XX_DIVERGENCE_RAD = 0.0046  # LMS5xx operating instructions, high resolution: distance × 0.0046 rad + 13 mm
