@@ -1,23 +1,30 @@
-# `make serve` and `make test` each do all set-up on a fresh machine.
+# `make serve` and `make test` each do all set-up on a fresh machine: `serve` installs the
+# runtime only; `test` (and bench, soak, validation) adds the test and plot extras.
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 SCENE  ?= railway
 
-.PHONY: install serve test soak bench validation lint clean
+.PHONY: runtime install serve test soak bench validation lint clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
-
-$(VENV)/.installed: $(BIN)/python pyproject.toml
 	$(BIN)/pip install --quiet --upgrade pip
+
+$(VENV)/.runtime: $(BIN)/python pyproject.toml
+	$(BIN)/pip install --quiet -e .
+	touch $@
+
+$(VENV)/.installed: $(VENV)/.runtime
 	$(BIN)/pip install --quiet -e '.[test,plot]'
 	touch $@
+
+runtime: $(VENV)/.runtime
 
 install: $(VENV)/.installed
 
 # make serve ARGS="--endpoint urg=tcp:127.0.0.1:0 --speed 2"
-serve: install
+serve: runtime
 	$(BIN)/lrf-emulator serve $(SCENE) $(ARGS)
 
 test: install
