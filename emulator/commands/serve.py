@@ -188,6 +188,7 @@ class Watching:
         self.browser: Any = None  # the view's process (process.BrowserViewProcess), once prepared
         self.publisher: Any = None  # the Foxglove/MCAP process (foxglove_live.FoxglovePublisher), once prepared
         self.running: list = []
+        self.refused: list[str] = []  # an address asked for and taken, reported with the endpoints' (serve fails)
 
     @staticmethod
     def from_args(args: argparse.Namespace) -> Watching:
@@ -229,7 +230,8 @@ class Watching:
             return BrowserViewProcess(scene, self.view)
         except PortTaken as taken:
             if self.explicit_view:
-                raise UserError(f"--view {self.view[0]}:{self.view[1]}: {taken}") from None
+                self.refused.append(f"--view {self.view[0]}:{self.view[1]}: {taken}")
+                return None
             print(f"view off: {taken} (choose one with --view HOST:PORT)", file=sys.stderr, flush=True)
             return None
         except ViewFailed as failed:
@@ -303,10 +305,15 @@ async def _serve(
         daemon.stop()
     loop.add_signal_handler(signal.SIGUSR1, _print_stats, daemon)
     server = ControlServer(session, control, token) if session is not None and control is not None else None
+    refused = list(watching.refused) if watching is not None else []  # a port taken: told with the endpoints'
     if server is not None:
-        await server.start()  # before any endpoint serves: a port in use stops serve at once
+        try:
+            await server.start()  # before any endpoint serves: a port in use stops serve at once
+        except UserError as error:
+            refused.insert(0, str(error))
+            server = None
     try:
-        await daemon.run(_announce, lambda: _started(server, watching))
+        await daemon.run(_announce, lambda: _started(server, watching), refused)
     finally:
         if server is not None:
             await server.close()

@@ -387,14 +387,18 @@ class Daemon:
         self._timer: PreciseTimer | None = None
         self._stopped = asyncio.Event()  # set by stop(), even before run() has begun
 
-    def start(self, loop: asyncio.AbstractEventLoop, on_ready: Callable[[Ready], None]) -> None:
+    def start(
+        self, loop: asyncio.AbstractEventLoop, on_ready: Callable[[Ready], None], refused: Sequence[str] = ()
+    ) -> None:
         """Bind every endpoint, then call `on_ready` for each: a client reading the
         `ready` lines never finds one endpoint serving while a later one fails.
-        If one cannot be bound, those already bound are closed and a UserError
-        names it and where it was asked for."""
+        If any cannot be bound, or the caller `refused` something of its own (a
+        port taken), all are closed and one UserError names every one, a line
+        each, with where it was asked for."""
         factory, executor = self._scan_sources()
         self._timer = shared_timer(loop)
         readies = []
+        failures: list[str] = []
         for ordinal, (spec, addresses) in enumerate(self._plan):
             scans = self.scan_caches[spec.name] = ScanCache(
                 factory(spec), executor, phase=ordinal, observer=self._on_scan, defer=self._defer
@@ -408,9 +412,12 @@ class Daemon:
                 try:
                     readies.append(self._open(spec, address, session, loop))
                 except UserError as error:
-                    self.close()
-                    raise UserError(f"{self._origin(spec, position)}: {error}") from None
+                    failures.append(f"{self._origin(spec, position)}: {error}")
+                    continue
                 self.sessions.append(session)
+        if failures or refused:
+            self.close()
+            raise UserError("\n".join([*failures, *refused]))
         if self.world is not None:  # readers (the control API) can ask any sensor of the world
             for spec in self.scene.sensors:
                 if spec.name not in self.scan_caches:
@@ -477,12 +484,13 @@ class Daemon:
         return Ready(spec.name, spec.model, uri, detail)
 
     async def run(
-        self, on_ready: Callable[[Ready], None] | None = None, on_started: Callable[[], None] | None = None
+        self, on_ready: Callable[[Ready], None] | None = None, on_started: Callable[[], None] | None = None,
+        refused: Sequence[str] = (),
     ) -> None:
         """Serve until `stop()`; endpoints are closed (symlinks removed) on the way out.
-        `on_started` runs once every endpoint serves."""
+        `on_started` runs once every endpoint serves; `refused` as for `start`."""
         try:
-            self.start(asyncio.get_running_loop(), on_ready or (lambda ready: None))
+            self.start(asyncio.get_running_loop(), on_ready or (lambda ready: None), refused)
             if on_started is not None:
                 on_started()
             await self._stopped.wait()

@@ -34,6 +34,11 @@ BAUD_OF_SPEED: dict[int, int] = {
 }
 
 
+def is_stale_pty_link(target: str) -> bool:
+    """A link's target names a pty (/dev/pts/N) that is gone: its daemon died without removing it."""
+    return re.fullmatch(r"/dev/pts/[0-9]+", target) is not None and not os.path.lexists(target)
+
+
 class PtyEndpoint(ClientSlot):
     """Serves one session on a pty published at `address.path`.
 
@@ -100,11 +105,15 @@ class PtyEndpoint(ClientSlot):
         return BAUD_OF_SPEED.get(speed)
 
     def _refuse_existing_path(self) -> None:
-        """Never replace what is at PATH: it may be another daemon's live link or a user's
-        file, and a link left by a killed daemon cannot be told apart from a live one."""
+        """Replace only a link a daemon that died left behind (to a /dev/pts/N that no longer
+        exists); refuse anything else at PATH: another daemon's live link, a user's file."""
         if os.path.islink(self.link_path):
+            target = os.readlink(self.link_path)
+            if is_stale_pty_link(target):
+                os.unlink(self.link_path)
+                return
             raise UserError(
-                f"{self.address}: {self.link_path} already exists (a symlink to {os.readlink(self.link_path)}); "
+                f"{self.address}: {self.link_path} already exists (a symlink to {target}); "
                 "another daemon may be serving it: remove it if not"
             )
         if os.path.lexists(self.link_path):

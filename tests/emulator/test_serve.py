@@ -198,6 +198,38 @@ def test_port_in_use_is_a_user_error_with_no_ready_line_and_leaves_no_symlink(tm
     assert not os.path.lexists(tmp_path / "u")
 
 
+def test_every_taken_port_and_path_is_reported_at_once(tmp_path: Path) -> None:
+    """Two endpoint ports, a pty path, the control API's and the view's port all taken:
+    one line each, exit 2, nothing announced and nothing left behind."""
+    (tmp_path / "ttyLMS0").write_text("a user's file\n")
+    sockets = [socket.socket() for _ in range(4)]
+    try:
+        for taken in sockets:
+            taken.bind(("127.0.0.1", 0))
+            taken.listen(1)
+        urg, lms, control, view = (taken.getsockname()[1] for taken in sockets)
+        result = subprocess.run(
+            [*serve_command(), "serve", "railway", "--endpoint", f"urg=tcp:127.0.0.1:{urg}",
+             "--endpoint", "urg=pty:ttyURG0", "--endpoint", "lms=pty:ttyLMS0", "--endpoint", f"lms=tcp:127.0.0.1:{lms}",
+             "--control", f"127.0.0.1:{control}", "--view", f"127.0.0.1:{view}"],
+            cwd=tmp_path, capture_output=True, text=True, timeout=60,
+        )
+    finally:
+        for taken in sockets:
+            taken.close()
+    assert result.returncode == 2 and result.stdout == ""
+    lines = result.stderr.splitlines()
+    assert len(lines) == 5, result.stderr
+    assert all(line.startswith("lrf-emulator serve: ") for line in lines)
+    assert f"--endpoint urg: tcp:127.0.0.1:{urg}: Address already in use" in lines[0]
+    assert "--endpoint lms: pty:ttyLMS0:" in lines[1] and "already exists" in lines[1]
+    assert f"--endpoint lms: tcp:127.0.0.1:{lms}: Address already in use" in lines[2]
+    assert f"--control 127.0.0.1:{control}: cannot listen" in lines[3]
+    assert f"--view 127.0.0.1:{view}:" in lines[4]
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["ttyLMS0"]  # the pty made for urg is gone again
+    assert (tmp_path / "ttyLMS0").read_text() == "a user's file\n"
+
+
 def test_a_taken_port_from_the_scene_file_is_named_by_file_table_and_key(tmp_path: Path) -> None:
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))

@@ -351,7 +351,7 @@ def test_pty_symlink_is_created_and_removed_on_close(loop_thread: LoopThread, tm
 def test_anything_already_at_the_pty_path_is_a_user_error_and_is_kept(
     loop_thread: LoopThread, tmp_path: Path, existing: str
 ) -> None:
-    """A link left by a killed daemon cannot be told from a live daemon's: nothing is replaced."""
+    """Only a link to a vanished /dev/pts/N is a dead daemon's: nothing else is replaced."""
     path = tmp_path / "tty0"
     target = tmp_path / "precious"
     target.write_text("not a device")

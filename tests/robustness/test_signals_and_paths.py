@@ -54,27 +54,71 @@ def test_a_stop_signal_during_start_up_exits_quietly_and_leaves_nothing(
     assert not os.path.lexists(tmp_path / "ttyURG0") and not os.path.lexists(tmp_path / "ttyLMS0")
 
 
-@pytest.mark.parametrize("kind", ["link to a file", "dangling link", "file"])
+@pytest.mark.parametrize("kind", ["link to a file", "dangling link", "link to a live pty", "file", "directory"])
 def test_serve_refuses_a_pty_path_that_exists_and_leaves_it_alone(tmp_path: Path, kind: str) -> None:
     precious = tmp_path / "hostname"
     precious.write_text("precious\n")
     path = tmp_path / "ttyURG0"
-    if kind == "link to a file":
-        path.symlink_to(precious)
-    elif kind == "dangling link":
-        path.symlink_to("/dev/pts/999999")
-    else:
-        path.write_text("mine\n")
-    result = subprocess.run(serve_args(tmp_path), stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=60)
+    master, slave = os.openpty()  # a pty in use, as another daemon's or a terminal's
+    try:
+        live = os.ttyname(slave)
+        target = {"link to a file": str(precious), "dangling link": str(tmp_path / "gone"), "link to a live pty": live}
+        if kind in target:
+            path.symlink_to(target[kind])
+        elif kind == "directory":
+            path.mkdir()
+        else:
+            path.write_text("mine\n")
+        result = subprocess.run(serve_args(tmp_path), stdin=subprocess.DEVNULL, capture_output=True, text=True,
+                                timeout=60)
+    finally:
+        os.close(slave)
+        os.close(master)
     assert result.returncode == 2
     assert len(result.stderr.strip().splitlines()) == 1 and "ttyURG0" in result.stderr, result.stderr
     assert "already exists" in result.stderr
     assert os.path.lexists(path) and precious.read_text() == "precious\n"
-    if kind == "file":
-        assert path.read_text() == "mine\n"
+    if kind in target:
+        assert os.readlink(path) == target[kind]
+    elif kind == "directory":
+        assert path.is_dir() and not path.is_symlink()
     else:
-        assert os.readlink(path) in (str(precious), "/dev/pts/999999")
+        assert path.read_text() == "mine\n"
     assert not os.path.lexists(tmp_path / "ttyLMS0")
+
+
+def vanished_pty() -> str:
+    """A /dev/pts/N no pty has: what a daemon killed with SIGKILL leaves its link pointing to."""
+    number = max(int(name) for name in os.listdir("/dev/pts") if name.isdigit()) + 1000
+    assert not os.path.lexists(f"/dev/pts/{number}")
+    return f"/dev/pts/{number}"
+
+
+def test_a_link_left_by_a_daemon_that_died_is_replaced(tmp_path: Path) -> None:
+    first = ServeProcess("railway", [f"urg=pty:{tmp_path / 'ttyURG0'}", f"lms=pty:{tmp_path / 'ttyLMS0'}"],
+                         extra_args=["--workers", "0", "--control", "off"])  # no child process outlives it
+    first.process.kill()  # SIGKILL: no chance to remove its links
+    first.process.wait(10)
+    first.stop()
+    assert os.path.islink(tmp_path / "ttyURG0")
+    for link in ("ttyURG0", "ttyLMS0"):  # their ptys went with the daemon; pin the links to numbers surely gone
+        os.unlink(tmp_path / link)
+        os.symlink(vanished_pty(), tmp_path / link)
+    with ServeProcess("railway", [f"urg=pty:{tmp_path / 'ttyURG0'}", f"lms=pty:{tmp_path / 'ttyLMS0'}"]) as second:
+        link = os.readlink(tmp_path / "ttyURG0")
+        assert os.path.exists(link) and link == second.endpoint("urg", "pty").device
+        client = open_raw(f"pty:{tmp_path / 'ttyURG0'}")
+        try:
+            client.send(b"VV\n")
+            reply = b""
+            for _ in range(20):
+                reply += client.drain(0.1)
+                if reply.endswith(b"\n\n"):
+                    break
+            assert reply.startswith(b"VV\n00P\n")
+        finally:
+            client.close()
+    assert not os.path.lexists(tmp_path / "ttyURG0") and not os.path.lexists(tmp_path / "ttyLMS0")
 
 
 def test_a_second_daemon_on_the_same_path_is_refused_and_the_first_keeps_serving(tmp_path: Path) -> None:
