@@ -1,5 +1,6 @@
 """`lrf-emulator replay LOG --device MODEL [--endpoint URI]...`, and `replay FILE.mcap --topic T --device ...`: a LaserScan topic of an MCAP file
-(a ROS 2 bag or a Foxglove recording; emulator/recording/mcap_replay.py).
+(a Foxglove recording, or a ROS 2 bag's MCAP file; emulator/recording/mcap_replay.py) or of a ROS bag
+(a ROS 2 bag directory or a ROS 1 `.bag`; emulator/recording/bag_replay.py).
 
 Serves a recorded log (from `record`, or a real sensor's log in the same
 format) through the real protocol on the daemon, at the log's recorded rate,
@@ -30,15 +31,16 @@ from emulator.recording.textlog import Log, read_log
 from emulator.scene.model import Pose, Scene, SensorSpec
 
 MCAP_MAGIC = b"\x89MCAP"
+ROS1_BAG_MAGIC = b"#ROSBAG V2.0"
 DEFAULT_ENDPOINTS = {**{model: "tcp:127.0.0.1:10940" for model in MODELS if model != LMS_MODEL}, LMS_MODEL: "pty:ttyLMS0"}
 DEFAULT_NAMES = {URG_MODEL: "urg", "utm-30lx": "utm", "utm-30lx-ew": "utm", "ust-10lx": "ust", "ust-20lx": "ust", LMS_MODEL: "lms"}
 LMS_WINDOWS = {(180, 1.0), (180, 0.5), (100, 1.0), (100, 0.5), (100, 0.25)}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("log", type=Path, metavar="LOG", help="a log written by `record` (or in its format), or an MCAP file")
+    parser.add_argument("log", type=Path, metavar="LOG", help="a log written by `record` (or in its format), an MCAP file, or a ROS bag (ROS 2 directory, ROS 1 .bag)")
     parser.add_argument("--topic", metavar="T", default=None,
-                        help="for an MCAP file: the LaserScan topic to serve (default: its only one)")
+                        help="for an MCAP file or a bag: the LaserScan topic to serve (default: its only one)")
     # --device: every other command's --model is the smoke preset
     parser.add_argument("--device", dest="model", required=True, choices=MODELS, help="the device to serve the log as")
     parser.add_argument(
@@ -82,11 +84,22 @@ def is_mcap(path: Path) -> bool:
         return False
 
 
+def is_bag(path: Path) -> bool:
+    """A ROS 2 bag directory (its metadata.yaml) or a ROS 1 bag file (its magic line)."""
+    if path.is_dir():
+        return (path / "metadata.yaml").is_file()
+    try:
+        with open(path, "rb") as file:
+            return file.read(len(ROS1_BAG_MAGIC)) == ROS1_BAG_MAGIC
+    except OSError:
+        return False
+
+
 def run(args: argparse.Namespace) -> int:
-    if is_mcap(args.log):
+    if is_mcap(args.log) or is_bag(args.log):
         return _run_mcap(args)
     if args.topic is not None:
-        raise UserError(f"--topic: {args.log} is not an MCAP file")
+        raise UserError(f"--topic: {args.log} is not an MCAP file or a ROS bag")
     log = read_log(args.log)
     sensor = replay_sensor(log, args.model, log.header.sensor or DEFAULT_NAMES[args.model])
     scene = replay_scene(log, args.model, args.endpoint)
@@ -95,9 +108,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_mcap(args: argparse.Namespace) -> int:
-    from emulator.recording.mcap_replay import LaserScanReplay, read_laser_scans  # mcap readers: only when asked for
+    from emulator.recording.bag_replay import read_bag_laser_scans  # readers: only when asked for
+    from emulator.recording.mcap_replay import LaserScanReplay, read_laser_scans
 
-    scans = read_laser_scans(args.log, args.topic)
+    scans = read_bag_laser_scans(args.log, args.topic) if is_bag(args.log) else read_laser_scans(args.log, args.topic)
     name = DEFAULT_NAMES[args.model]
     sensor = LaserScanReplay(scans, args.model, name)
     scene = sensor_only_scene(SensorSpec(name, args.model, Pose(), tuple(args.endpoint or [DEFAULT_ENDPOINTS[args.model]]), {}))

@@ -20,7 +20,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Optional, Sequence
+from typing import Any, Callable, Iterable, Optional, Sequence
 
 import numpy as np
 from mcap.decoder import DecoderFactory
@@ -102,22 +102,29 @@ def read_laser_scans(path: Path, topic: str | None) -> LaserScans:
         with open(path, "rb") as file:
             reader = make_reader(file, decoder_factories=[ProtobufDecoderFactory(), Ros2DecoderFactory(), _JsonDecoderFactory()])
             topic = _choose_topic(path, reader, topic)
-            times, starts, steps, ranges, limits = [], [], [], [], []
-            for _, _, message, decoded in reader.iter_decoded_messages(topics=[topic], log_time_order=True):
-                if len(times) >= MAX_MESSAGES:
-                    raise UserError(f"{path.name}: topic {topic}: more than {MAX_MESSAGES} scans")
-                values = np.asarray(_field(decoded, "ranges", ()), dtype=float)
-                if not 0 < values.size <= MAX_BEAMS:
-                    raise UserError(f"{path.name}: topic {topic}: a scan with {values.size} ranges (need 1..{MAX_BEAMS})")
-                start, step, limit = _scan_geometry(decoded, values.size)
-                if not (np.isfinite(start) and np.isfinite(step)) or (values.size > 1 and step == 0.0):
-                    raise UserError(f"{path.name}: topic {topic}: a scan without a usable angle step")
-                times.append(_stamp_s(decoded, message.log_time))
-                starts.append(start), steps.append(step), ranges.append(values), limits.append(limit)
+            messages = ((decoded, message.log_time) for _, _, message, decoded
+                        in reader.iter_decoded_messages(topics=[topic], log_time_order=True))
+            return laser_scans(path, topic, messages)
     except FileNotFoundError:
         raise UserError(f"no such MCAP file: {path}") from None
     except (McapError, OSError, ValueError, KeyError, TypeError, RuntimeError) as error:
         raise UserError(f"{path.name}: cannot read MCAP: {error}") from None
+
+
+def laser_scans(path: Path, topic: str, messages: Iterable[tuple[Any, int]]) -> LaserScans:
+    """The decoded LaserScans of `topic` (each with its log time in ns), checked and ordered by stamp."""
+    times, starts, steps, ranges, limits = [], [], [], [], []
+    for decoded, log_time_ns in messages:
+        if len(times) >= MAX_MESSAGES:
+            raise UserError(f"{path.name}: topic {topic}: more than {MAX_MESSAGES} scans")
+        values = np.asarray(_field(decoded, "ranges", ()), dtype=float)
+        if not 0 < values.size <= MAX_BEAMS:
+            raise UserError(f"{path.name}: topic {topic}: a scan with {values.size} ranges (need 1..{MAX_BEAMS})")
+        start, step, limit = _scan_geometry(decoded, values.size)
+        if not (np.isfinite(start) and np.isfinite(step)) or (values.size > 1 and step == 0.0):
+            raise UserError(f"{path.name}: topic {topic}: a scan without a usable angle step")
+        times.append(_stamp_s(decoded, log_time_ns))
+        starts.append(start), steps.append(step), ranges.append(values), limits.append(limit)
     if not times:
         raise UserError(f"{path.name}: topic {topic}: no scans")
     order = np.argsort(np.asarray(times), kind="stable")
