@@ -1,14 +1,20 @@
 """A simulated Hokuyo of any model in `hokuyo_models`: beams, timing and device values.
 
 The URG-04LX's values come from the scene's preset (`urg_values`). The SCIP 2.2
-units get theirs from the preset's `hokuyo_values` when it has one, else from
-the paper's Hokuyo rule (`formsma2011.hokuyo_values`) with the unit's own range
-and codes: one echo, no intensity.
+units (docs/physical-model.md §6):
+
+- under `physical`, the multi-echo receiver (`physical.multi_echo.echo_lists_at`
+  with the model's `PULSED_RECEIVERS` entry): every echo within DMIN..DMAX,
+  nearest first, with its intensity; `values` (what GD/MD send) is the first
+  echo, or when none is in range the code for "too near" (an echo closer than
+  DMIN) or "no object in range";
+- under `formsma2011`, the paper's Hokuyo rule with the unit's own range and
+  codes (`formsma2011.hokuyo_values`): one echo, its intensity the surface's
+  reflectivity × cos(incidence) / (range / 2.5 m)² on the receiver's scale.
 """
 
 from __future__ import annotations
 
-from types import ModuleType
 from typing import Sequence
 
 import numpy as np
@@ -18,6 +24,8 @@ from emulator.scene.model import Scene, SensorSpec
 from emulator.sensors import formsma2011
 from emulator.sensors.hokuyo_models import URG_04LX, HokuyoModel
 from emulator.sensors.mount import SensorMount, cast_moving
+from emulator.sensors.physical.multi_echo import echo_lists_at, intensity_of
+from emulator.sensors.physical.params import DEFAULT_PARAMS, PULSED_RECEIVERS
 from emulator.sensors.response import Beams, response_model, values_at_instants
 from emulator.sensors.scan import Scan, simulated_instant
 
@@ -31,9 +39,7 @@ def revolution_phase_ms(scene: Scene, name: str, model: HokuyoModel) -> int:
     return same.index(name) * int(round(model.period_s * 1000)) // len(same)
 
 
-def hokuyo_preset(preset: ModuleType) -> ModuleType:
-    """The module giving the SCIP 2.2 units' values: the preset if it models them, else formsma2011."""
-    return preset if hasattr(preset, "hokuyo_values") or hasattr(preset, "hokuyo_values_at") else formsma2011
+REFERENCE_RANGE_M = 2.5  # the receivers' reference target: white paper at 2.5 m
 
 
 class HokuyoSensor:
@@ -76,9 +82,46 @@ class HokuyoSensor:
         values = np.full((len(instants), model.steps), model.no_echo, dtype=np.int64)
         if model is URG_04LX:
             values[:, self._valid] = values_at_instants(self._response, "urg_values", hits, beams)
+            return [Scan(self.name, self.model, t, self.angles_rad, row, "mm") for t, row in zip(times_s, values)]
+        if not instants:
+            return []
+        first, echoes, strengths = self._echoes(hits, beams)
+        values[:, self._valid] = first
+        shape = (len(instants), model.steps, model.max_echoes)
+        all_echoes, all_strengths = np.full(shape, -1, dtype=np.int64), np.full(shape, -1, dtype=np.int64)
+        all_echoes[:, :, 0], all_strengths[:, :, 0] = values, 0  # outside AMIN..AMAX: the code, no intensity
+        all_echoes[:, self._valid], all_strengths[:, self._valid] = echoes, strengths
+        return [
+            Scan(
+                self.name, self.model, t, self.angles_rad, row, "mm", None, row_strengths[:, 0],
+                row_echoes if model.max_echoes > 1 else None, row_strengths if model.max_echoes > 1 else None,
+            )
+            for t, row, row_echoes, row_strengths in zip(times_s, values, all_echoes, all_strengths)
+        ]
+
+    def _echoes(self, hits: Sequence[BeamHits], beams: Sequence[Beams]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(K, N) single-echo values, (K, N, E) echoes and their intensities: each beam's first slot holds
+        its value (a code when nothing is in range, intensity 0), further echoes nearest first, -1 after."""
+        model, receiver = self.description, PULSED_RECEIVERS[self.model]
+        if self.scene.model == "physical":
+            lists = echo_lists_at(hits, beams, receiver, DEFAULT_PARAMS)
+            millimetres = np.rint(np.nan_to_num(lists.ranges_m, nan=-1.0) * 1000.0).astype(np.int64)
+            seen = np.isfinite(lists.ranges_m) & (millimetres >= model.min_value_mm) & (millimetres <= model.max_value_mm)
+            too_near = (np.isfinite(lists.ranges_m) & (millimetres < model.min_value_mm)).any(axis=-1)
+            echoes, strengths = _nearest_first(seen, millimetres, lists.intensities(receiver))
+            code = np.where(too_near, model.non_measurable, model.no_echo)
+            first = np.where(echoes[..., 0] >= 0, echoes[..., 0], code)
         else:
-            values[:, self._valid] = values_at_instants(hokuyo_preset(self._response), "hokuyo_values", hits, beams, model)
-        return [Scan(self.name, self.model, t, self.angles_rad, row, "mm") for t, row in zip(times_s, values)]
+            first = values_at_instants(formsma2011, "hokuyo_values", hits, beams, model).astype(np.int64)
+            reflectivity = np.stack([hit.reflectivity * hit.cos_incidence for hit in hits])
+            range_m = np.maximum(first / 1000.0, 0.1)
+            power = np.nan_to_num(reflectivity) / (range_m / REFERENCE_RANGE_M) ** 2
+            echoes = np.full((*first.shape, model.max_echoes), -1, dtype=np.int64)
+            strengths = np.full_like(echoes, -1)
+            strengths[..., 0] = np.where(first >= model.min_value_mm, intensity_of(power, receiver), 0)
+        echoes[..., 0] = first
+        strengths[..., 0] = np.maximum(strengths[..., 0], 0)
+        return first, echoes, strengths
 
     def _casts(self, instants: list[float]) -> list[tuple[BeamHits, Beams]]:
         """The valid steps' hits at each instant, each beam at the instant its step is measured."""
@@ -95,3 +138,12 @@ class HokuyoSensor:
             )
             casts.append((hits, beams))
         return casts
+
+
+def _nearest_first(seen: np.ndarray, millimetres: np.ndarray, intensities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The echoes in the unit's range, nearest first, -1 after them (one out of range leaves no gap)."""
+    order = np.argsort(~seen, axis=-1, kind="stable")
+    kept = np.take_along_axis(seen, order, -1)
+    echoes = np.where(kept, np.take_along_axis(millimetres, order, -1), -1)
+    strengths = np.where(kept, np.take_along_axis(intensities, order, -1), -1)
+    return echoes, strengths

@@ -7,12 +7,16 @@ UTM-30LX-EW lacks the UST's %ST, so it is built with tsync=False.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
 import pytest
 from hokuyolx import HokuyoLX
 from support.interop import scan_values
+
+from emulator.scene import load_scene
+from emulator.sensors import create_sensor
 
 STEPS = 1081
 
@@ -73,3 +77,41 @@ def test_utm_30lx_ew_over_tcp(utm: HokuyoLX, utm_room: Path) -> None:
     np.testing.assert_array_equal(ranges, step_values(utm_room, "utm", stamp / 1000))
     scans = list(utm.iter_dist(3))
     assert np.all(np.diff([stamp for _, stamp, _ in scans]) == 25)
+
+
+def decode_echo_lines(lines: list[str], client: HokuyoLX) -> list[list[tuple[int, int]]]:
+    """Range + intensity echoes per step from HE data lines (hokuyolx checks each line's sum; the
+    '&'-prefixed further echoes are read here: hokuyolx 0.9 decodes single echoes only)."""
+    text = "".join(client._check_sum(line) for line in lines if line)
+    steps: list[list[tuple[int, int]]] = []
+    position = 0
+    while position < len(text):
+        further = text[position] == "&"
+        position += further
+        echo = (HokuyoLX._convert2int(text[position : position + 3]), HokuyoLX._convert2int(text[position + 3 : position + 6]))
+        position += 6
+        if further:
+            steps[-1].append(echo)
+        else:
+            steps.append([echo])
+    return steps
+
+
+def test_multi_echo_with_intensity_under_physical(serve, ust_room: Path, tcp_port: int) -> None:
+    """hokuyolx's own request/response path (send, header check, status sum) carries HE; every echo
+    equals the simulated sensor's at the scan's stamp, and some beams in the smoke block have two."""
+    daemon = serve(ust_room, f"ust=tcp:127.0.0.1:{tcp_port}", extra_args=("--model", "physical"))
+    client = HokuyoLX(addr=daemon.endpoint("ust", "tcp").address, convert_time=False)
+    try:
+        status, lines = client._send_req("HE", "0000108000")
+        stamp = client._convert2ts(lines[0], False)
+        steps = decode_echo_lines(lines[1:], client)
+    finally:
+        client.close()
+    assert status == "00" and len(steps) == STEPS
+    scene = dataclasses.replace(load_scene(ust_room), model="physical")
+    scan = create_sensor(scene, "ust").scan(stamp / 1000)
+    for step, echoes in enumerate(steps):
+        count = max(1, int((scan.echoes[step] >= 0).sum()))
+        assert echoes == [(int(scan.echoes[step, k]), int(scan.echo_intensities[step, k])) for k in range(count)], step
+    assert sum(len(echoes) > 1 for echoes in steps) >= 1
