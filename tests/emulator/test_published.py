@@ -18,16 +18,18 @@ from emulator.recording.laserscan import values_to_ranges
 from emulator.scene import load_scene
 from emulator.scene.loader import SENSOR_MODELS
 from emulator.sensors import create_sensor, lms200, urg04lx
+from emulator.sensors.hokuyo_models import HOKUYO_MODELS
 from emulator.sensors.published import PUBLICATIONS, laser_scan_fields, published
 from emulator.sensors.scan import Scan
 from emulator.sensors.scan_json import scan_json
 from protocols.lms2xx import Lms200Device
 from protocols.scip import UrgDevice
+from protocols.scip.scip22 import Scip22Device
 
 
-def pp_parameters() -> dict[str, int]:
-    """AMIN, AMAX, AFRT, ARES as the emulated URG-04LX answers `PP`."""
-    device = UrgDevice(lambda t: None, timing="fast")
+def pp_parameters(model: str = urg04lx.MODEL) -> dict[str, int]:
+    """AMIN, AMAX, AFRT, ARES as the emulated Hokuyo `model` answers `PP`."""
+    device = UrgDevice(lambda t: None, timing="fast") if model == urg04lx.MODEL else Scip22Device(lambda t: None, model)
     [reply] = device.receive(b"PP\n", 1.0)
     fields = {}
     for line in reply.data.split(b"\n")[2:]:
@@ -53,6 +55,20 @@ def test_every_exported_urg_scan_is_the_steps_pp_names() -> None:
     np.testing.assert_array_equal(shown.values, scan.values[pp["AMIN"]: pp["AMAX"] + 1])
     out = scan_json(scan, sensor)
     assert len(out["values"]) == len(out["times_s"]) == 682 and out["angle_min"] == fields["angle_min"]
+
+
+@pytest.mark.parametrize("model", sorted(set(HOKUYO_MODELS) - {urg04lx.MODEL}))
+def test_every_exported_scip22_scan_is_the_steps_pp_names(model: str) -> None:
+    pp = pp_parameters(model)
+    hokuyo = HOKUYO_MODELS[model]
+    angles = hokuyo.step_angles_rad()
+    scan = Scan("front", model, 1.0, angles, np.full(len(angles), 1000), "mm")
+    shown = published(scan)
+    assert len(shown.values) == pp["AMAX"] - pp["AMIN"] + 1
+    step = 2 * math.pi / pp["ARES"]
+    fields = laser_scan_fields(shown)
+    assert fields["angle_min"] == pytest.approx((pp["AMIN"] - pp["AFRT"]) * step, abs=1e-12)
+    assert fields["angle_max"] == pytest.approx((pp["AMAX"] - pp["AFRT"]) * step, abs=1e-12)
 
 
 @pytest.mark.parametrize("angle, resolution", [(180, 1.0), (180, 0.5), (100, 1.0), (100, 0.5), (100, 0.25)])
