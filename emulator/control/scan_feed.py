@@ -68,7 +68,7 @@ class ScanFeed:
         period = configured_period_s(spec)
         time_s = max(0, math.floor(self._daemon.clock.now() / period + 1e-9)) * period
         scan = await self._scan(spec, time_s)
-        return await asyncio.get_running_loop().run_in_executor(self._serializer, scan_json, scan)
+        return await asyncio.get_running_loop().run_in_executor(self._serializer, scan_json, scan, None, period)
 
     async def _scan(self, spec: SensorSpec, time_s: float) -> Scan:
         """The scan at `time_s`, computed again if a live change replaced it while it was computed."""
@@ -114,14 +114,14 @@ class ScanFeed:
                 if clock.now() < time_s - 1e-6:
                     continue
             scan = await self._scan(spec, time_s)
-            message = await loop.run_in_executor(self._serializer, _scan_message, scan)
+            message = await loop.run_in_executor(self._serializer, _scan_message, scan, period)
             for subscriber in list(self._subscribers.get(name, ())):
                 subscriber(message)
             index = max(index + 1, math.floor(clock.now() / period + 1e-9))  # a late feed skips, never bursts
 
 
-def _scan_message(scan: Scan) -> str:
-    return json.dumps({"type": "scan", **scan_json(scan)})
+def _scan_message(scan: Scan, period_s: float) -> str:
+    return json.dumps({"type": "scan", **scan_json(scan, None, period_s)})
 
 
 def _retimed(scan: Scan, time_s: float) -> Scan:

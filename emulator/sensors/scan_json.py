@@ -28,8 +28,9 @@ def pose_json(sensor: Sensor, time_s: float) -> dict:
     }
 
 
-def scan_json(scan: Scan, sensor: Sensor | None = None) -> dict:
-    """The scan's measured beams as JSON; with the `sensor` that took it, also its `pose` and the beams' `times_s`."""
+def scan_json(scan: Scan, sensor: Sensor | None = None, period_s: float | None = None) -> dict:
+    """The scan's measured beams as JSON; with the `sensor` that took it, also its `pose` and the beams' `times_s`.
+    `scan_time` is the sensor's configured period (`period_s` without a sensor; else the model's default)."""
     scan = published(scan)
     ranges = ranges_m(scan)
     extra = {} if sensor is None else {
@@ -44,6 +45,6 @@ def scan_json(scan: Scan, sensor: Sensor | None = None) -> dict:
         "angles_deg": np.round(np.degrees(scan.angles_rad), ANGLE_DECIMALS).tolist(),
         "values": [int(v) for v in scan.values],
         "ranges_m": [None if np.isnan(r) else float(r) for r in ranges],
-        **laser_scan_fields(scan, None if sensor is None else sensor.configured_period_s),
+        **laser_scan_fields(scan, sensor.configured_period_s if sensor is not None else period_s),
         **extra,
     }

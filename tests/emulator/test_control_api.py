@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
 import socket
 import subprocess
 import time
@@ -70,6 +71,7 @@ def test_a_plume_switched_on_shows_up_as_lms200_obstacles(daemon: ServeProcess) 
     url = daemon.control_url
     status, before = call(url, "GET", "/api/sensors/lms/scan")
     assert status == 200 and before["model"] == "lms200" and len(before["values"]) == 361
+    assert before["scan_time"] == pytest.approx(2 / 75) and before["angle_min"] == pytest.approx(-math.pi / 2)  # 180° at 0.5°
     ahead = np.abs(np.asarray(before["angles_deg"])) <= 3
     assert np.all(np.asarray(before["values"])[ahead] > 2800)  # the wall, 2.9 m away
     status, answer = call(url, "PATCH", "/api/smoke/plumes/fire", {"emitting": True})
@@ -336,7 +338,8 @@ def test_a_fleet_daemon_refuses_scans_of_sensors_it_does_not_serve(room: Path) -
     with ServeProcess(room, ENDPOINTS[:1], extra_args=("--sensors", "urg", "--control", "127.0.0.1:0")) as daemon:
         status, answer = call(daemon.control_url, "GET", "/api/sensors/lms/scan")
         assert status == 409 and "not served by this daemon" in answer["error"]
-        assert call(daemon.control_url, "GET", "/api/sensors/urg/scan")[0] == 200
+        status, urg = call(daemon.control_url, "GET", "/api/sensors/urg/scan")
+        assert status == 200 and len(urg["values"]) == 682 and urg["scan_time"] == 0.1  # steps 44..725, urg_node's fields
 
 
 def test_a_paused_clock_stops_the_device_stream_and_resuming_continues_it(daemon: ServeProcess) -> None:
