@@ -108,10 +108,12 @@ class ExportedScans:
     times_s: np.ndarray  # (n,)
     ranges_m: np.ndarray  # (n, beams)
     valid: np.ndarray  # (n, beams) bool
+    intensity: np.ndarray | None = None  # (n, beams), when the scans carry it
 
 
 def export_2d_scans(rawlog: Path, label: str) -> ExportedScans:
-    """`rawlog-edit --export-2d-scans-txt`: one line per scan (time, N ranges, N flags)."""
+    """`rawlog-edit --export-2d-scans-txt`: one line per scan (time, N ranges, N flags, and N intensities
+    when the scans have them: its header then names INTENSITY[i])."""
     editor = program("rawlog-edit")
     # Run beside the log: rawlog-edit 2.5 joins an absolute input's folder and
     # the output name without a "/".
@@ -120,11 +122,14 @@ def export_2d_scans(rawlog: Path, label: str) -> ExportedScans:
     export = rawlog.with_name(f"{rawlog.stem}_{label}.txt")
     if result.returncode != 0 or not export.exists():
         raise MrptError(f"rawlog-edit exported no {label} scans from {rawlog}:\n{result.stdout[-2000:]}{result.stderr[-2000:]}")
+    with export.open() as text:
+        blocks = 3 if "INTENSITY" in text.readline() else 2
     rows = np.loadtxt(export, comments="%", ndmin=2)
-    if rows.shape[0] == 0 or rows.shape[1] < 3 or (rows.shape[1] - 1) % 2:
+    if rows.shape[0] == 0 or rows.shape[1] < 1 + blocks or (rows.shape[1] - 1) % blocks:
         raise MrptError(f"{export}: expected `time ranges... flags...` rows, got shape {rows.shape}")
-    count = (rows.shape[1] - 1) // 2
-    return ExportedScans(rows[:, 0], rows[:, 1:1 + count], rows[:, 1 + count:] == 1)
+    count = (rows.shape[1] - 1) // blocks
+    intensity = rows[:, 1 + 2 * count :] if blocks == 3 else None
+    return ExportedScans(rows[:, 0], rows[:, 1 : 1 + count], rows[:, 1 + count : 1 + 2 * count] == 1, intensity)
 
 
 def carmen_to_rawlog(carmen: Path, rawlog: Path) -> Path:

@@ -17,6 +17,8 @@ from support.interop import scan_values, urg_step_values
 from support.ports import free_tcp_port
 
 from emulator.bench import mrpt
+from emulator.scene import load_scene
+from emulator.sensors import create_sensor
 from emulator.bench.lms_rates import line_rate_limit
 
 def grab(folder: Path, section: str, scans: int, timeout_s: float, *, kill: bool = False) -> mrpt.Grabbed:
@@ -98,3 +100,24 @@ def test_csicklaserserial_after_a_driver_killed_mid_stream(serve, lms_room: Path
     times, ranges, _ = exported_scans(folder, "LMS", grab(folder, lms_section(port, 500000), scans=25, timeout_s=40))
     assert len(times) >= 20 and ranges.shape[1] == 361
     assert (len(times) - 1) / (times[-1] - times[0]) == pytest.approx(37.5, rel=0.1)  # at 500 k
+
+
+def test_chokuyourg_records_a_utm_30lx_ew_over_tcp_with_intensity(serve, utm_room: Path, tmp_path: Path) -> None:
+    """CHokuyoURG with `intensity = true` asks for ME (range + intensity) at the unit's 40 Hz; the
+    rawlog holds the scene's ranges and the simulated intensities of all 1081 steps."""
+    port = free_tcp_port()
+    serve(utm_room, f"utm=tcp:127.0.0.1:{port}")
+    section = f"[UTM]\ndriver = CHokuyoURG\nprocess_rate = 90\nsensorLabel = UTM\nIP_DIR = 127.0.0.1\nPORT_DIR = {port}\nintensity = true\n"
+    grabbed = grab(tmp_path, section, scans=60, timeout_s=20)
+    assert grabbed.returncode == 0 and grabbed.rawlog is not None, grabbed.output[-3000:]
+    scans = mrpt.export_2d_scans(grabbed.rawlog, "UTM")
+    assert len(scans.times_s) >= 40 and scans.ranges_m.shape[1] == 1081
+    period = np.median(np.diff(scans.times_s))
+    assert 0.02 <= period <= 0.03, np.diff(scans.times_s)
+    _, expected = scan_values(utm_room, "utm", 1.0)
+    np.testing.assert_array_equal(np.rint(scans.ranges_m * 1000).astype(int), np.tile(expected, (len(scans.times_s), 1)))
+    np.testing.assert_array_equal(scans.valid[0], expected >= 23)
+    assert scans.intensity is not None
+    intensities = create_sensor(load_scene(utm_room), "utm").scan(1.0).intensities
+    np.testing.assert_array_equal(scans.intensity, np.tile(intensities, (len(scans.times_s), 1)))
+    assert np.all(intensities[expected >= 23] > 0)
