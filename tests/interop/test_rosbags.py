@@ -213,3 +213,12 @@ def test_replay_serves_a_bag_to_hokuyolx(bags: Path, bag: str, tcp_port: int) ->
         finally:
             laser.close()
     assert any(np.array_equal(values, row) for row in recorded)
+
+
+@pytest.mark.parametrize("sensors, fmt, words", [
+    ("urg,lms", "text", "records one sensor"), ("urg,urg", "rosbag2", "name each sensor once"), ("urg,nope", "rosbag1", "nope"),
+])
+def test_a_wrong_sensor_list_is_one_line_exit_2(tmp_path: Path, sensors: str, fmt: str, words: str) -> None:
+    result = run("record", "rescue", "--sensor", sensors, "--end", "0.2", "--format", fmt, "--out", "x", cwd=tmp_path)
+    assert result.returncode == 2 and words in result.stderr and "Traceback" not in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and not (tmp_path / "x").exists()
