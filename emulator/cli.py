@@ -32,7 +32,7 @@ def package_version() -> str:
 SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "serve": ("serve", "serve the scene's sensors on their endpoints (the daemon)"),
     "scan": ("scan", "print one scan at a simulated time as JSON"),
-    "plot": ("plot", "draw a waterfall of scans and the smoke level over time (PNG)"),
+    "plot": ("plot", "draw a waterfall of scans and the smoke level over time, or a map (PNG, SVG, PDF...)"),
     "record": ("record", "write scans to a text log in the seed dataset's format"),
     "replay": ("replay", "serve a recorded log through the real protocol"),
     "bench": ("bench", "measure the simulation's and protocols' speed on this machine"),

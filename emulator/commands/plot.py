@@ -2,13 +2,15 @@
 and `lrf-emulator plot SCENE --map [--time T] [--sensor NAME] --out FILE.png`.
 
 A waterfall of the sensor's scans (time down, beam angle across, darker =
-shorter, red = error code) like the paper's Fig. 3 and 10, with the smoke level
-over time beside it like Fig. 5 (mean density along the beams and the assumed
-camera saturation for scenes with smoke regions; the share of beams meeting a
-plume for scenes with plumes). With `--map`, a top-down picture of the scene
-at time T instead (emulator/plots/map.py): solids, smoke shaded by density,
-plume particles, bodies' trajectories and, with `--sensor`, that sensor's
-scan. Needs matplotlib (`pip install '.[plot]'`).
+shorter with a range colour bar, red = error code) like the paper's Fig. 3 and
+10, with the smoke level over time beside it like Fig. 5 (mean density along
+the beams for scenes with smoke regions, the assumed camera saturation for
+scenes with a camera reference, the share of beams meeting a plume for scenes
+with plumes). With `--map`, a top-down picture of the scene at time T instead
+(emulator/plots/map.py): solids, smoke shaded by density, plume particles,
+bodies' trajectories and, with `--sensor`, that sensor's scan and error codes,
+with axes in metres and a legend. FILE's suffix chooses the format (png, svg,
+pdf, jpg, ...: docs/plots.md). Needs matplotlib (`pip install '.[plot]'`).
 """
 
 from __future__ import annotations

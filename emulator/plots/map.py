@@ -5,9 +5,11 @@ darkest); smoke regions are shaded orange by their density at the time asked
 (relative to the densest the scene ever gets); plume particles alive at that
 time are their collision boxes in purple; each moving body's whole trajectory
 is a blue line with a dot where the body is at that time; the chosen sensor's
-scan at that time is red points (green cross: the sensor). The axes fill the
-image with equal scale in x and y, so `MapView.pixel` turns a world point into
-the pixel it is drawn at (the tests read pixels back with it).
+scan at that time is red points (green cross: the sensor), and the directions
+whose beams returned an error code are teal ticks around it. Axes in metres
+with equal scale in x and y, a legend of what is drawn beside them;
+`MapView.pixel` turns a world point into the pixel it is drawn at (the tests
+read pixels back with it).
 """
 
 from __future__ import annotations
@@ -18,12 +20,12 @@ from pathlib import Path
 import numpy as np
 
 from emulator.plots.output import save_figure
-from emulator.plots.waterfall import pyplot
+from emulator.plots.waterfall import LMS_NO_RETURN_CODES, pyplot
 from emulator.scene import Pose, Scene, SceneObject, Shape
 from emulator.scene.bodies import Body, BodyPoses, Frames, Keyframes
 from emulator.scene.geometry import world_mesh
 from emulator.scene.plumes import particles_at
-from emulator.sensors import beam_times_s, create_sensor, ranges_m
+from emulator.sensors import beam_times_s, create_sensor, hokuyo_model, ranges_m
 from emulator.sensors.mount import SensorMount
 
 BACKGROUND_RGB = (1.0, 1.0, 1.0)
@@ -32,12 +34,17 @@ PLUME_RGB = (0.55, 0.3, 0.75)
 TRAJECTORY_RGB = (0.1, 0.3, 0.9)
 SCAN_RGB = (0.9, 0.05, 0.05)
 SENSOR_RGB = (0.0, 0.6, 0.1)
+ERROR_CODE_RGB = (0.0, 0.65, 0.75)
 FLOOR_TOP_M = 0.1  # objects no higher than this are floors: drawn, but they do not set the map's extent
 SOLID_DARKEST_AT_M = 2.0
 MAX_SMOKE_ALPHA = 0.75
 PLUME_ALPHA = 0.6
 MARGIN_M = 1.0
 TRAJECTORY_SAMPLES = 2000
+ERROR_TICKS = (0.025, 0.06)  # where an error code's tick runs from the sensor, in parts of the map's width
+# The image's frame around the map, in pixels: tick labels left and below, the title above, the legend right.
+FRAME_LEFT_PX, FRAME_BOTTOM_PX, FRAME_TOP_PX, FRAME_GAP_PX = 62, 44, 30, 12
+LEGEND_WIDTH_PX = 250
 
 
 def solid_grey(top_m: float) -> float:
@@ -52,18 +59,33 @@ def smoke_alpha(density: float, densest: float) -> float:
 
 @dataclass(frozen=True)
 class MapView:
-    """The world rectangle the image shows and the image's size: world point → pixel."""
+    """The world rectangle the map shows and where it lies on the image: world point → pixel."""
 
     x_range: tuple[float, float]
     y_range: tuple[float, float]
-    width_px: int
+    width_px: int  # the map's box on the image
     height_px: int
+    left_px: int = 0  # the box's top-left corner on the image
+    top_px: int = 0
 
     def pixel(self, x: float, y: float) -> tuple[int, int]:
-        """(row, column) of world point (x, y); row 0 is the top (largest y)."""
+        """(row, column) on the image of world point (x, y); row 0 is the top (largest y)."""
         column = (x - self.x_range[0]) / (self.x_range[1] - self.x_range[0]) * self.width_px
         row = (self.y_range[1] - y) / (self.y_range[1] - self.y_range[0]) * self.height_px
-        return int(row), int(column)
+        return self.top_px + int(row), self.left_px + int(column)
+
+    def inside(self, image: np.ndarray) -> np.ndarray:
+        """The map's box cut out of the image (the frame, tick labels and legend left out)."""
+        return image[self.top_px:self.top_px + self.height_px, self.left_px:self.left_px + self.width_px]
+
+
+def map_box(width_px: int, height_px: int) -> tuple[int, int, int, int]:
+    """(left, top, width, height) of the map on an image of that size: the frame's room taken
+    off (the legend's shrinks on a narrow image)."""
+    legend = min(LEGEND_WIDTH_PX, width_px // 3)
+    width = max(width_px - FRAME_LEFT_PX - FRAME_GAP_PX - legend, 1)
+    height = max(height_px - FRAME_TOP_PX - FRAME_BOTTOM_PX, 1)
+    return FRAME_LEFT_PX, FRAME_TOP_PX, width, height
 
 
 def sensor_poses_2d(scene: Scene, sensor: str, times_s: np.ndarray) -> np.ndarray:
@@ -129,16 +151,33 @@ def _outline(footprint: _Footprint) -> np.ndarray:
     return np.array(lower[:-1] + upper[:-1])
 
 
-def scan_points(scene: Scene, sensor: str, time_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """The sensor's scan at `time_s` as world points (n, 2), each from the sensor's pose at the
-    instant its beam was measured (error codes left out), and the pose at the time stamp (3,)."""
+@dataclass(frozen=True)
+class ScanOnMap:
+    """A scan in the world: its points, the beams that returned an error code (where each left
+    from and its direction), and the sensor's pose (x, y, yaw) at the time stamp."""
+
+    points: np.ndarray  # (n, 2)
+    error_origins: np.ndarray  # (k, 2)
+    error_angles: np.ndarray  # (k,) rad, world frame
+    pose: np.ndarray  # (3,)
+
+
+def scan_points(scene: Scene, sensor: str, time_s: float) -> ScanOnMap:
+    """The sensor's scan at `time_s` in the world, each beam from the sensor's pose at the instant
+    it was measured. Codes meaning "nothing in range" and a Hokuyo's steps outside its
+    measurable area are neither points nor errors."""
     scan = create_sensor(scene, sensor).configured_scan(time_s)
     ranges = ranges_m(scan)
+    beam_poses = sensor_poses_2d(scene, sensor, beam_times_s(scan))
+    angles = np.asarray(scan.angles_rad, dtype=float) + beam_poses[:, 2]
     seen = ~np.isnan(ranges)
-    beam_poses = sensor_poses_2d(scene, sensor, beam_times_s(scan)[seen])
-    angles = np.asarray(scan.angles_rad, dtype=float)[seen] + beam_poses[:, 2]
-    points = beam_poses[:, :2] + ranges[seen, None] * np.column_stack([np.cos(angles), np.sin(angles)])
-    return points, sensor_poses_2d(scene, sensor, np.array([time_s]))[0]
+    points = beam_poses[seen, :2] + ranges[seen, None] * np.column_stack([np.cos(angles[seen]), np.sin(angles[seen])])
+    hokuyo = hokuyo_model(scene.sensor(sensor).model)
+    measurable = np.zeros(len(ranges), dtype=bool)
+    measurable[hokuyo.valid_steps if hokuyo is not None else slice(None)] = True
+    no_return = np.isin(np.asarray(scan.values), hokuyo.no_return_codes if hokuyo is not None else LMS_NO_RETURN_CODES)
+    errors = ~seen & measurable & ~no_return
+    return ScanOnMap(points, beam_poses[errors, :2], angles[errors], sensor_poses_2d(scene, sensor, np.array([time_s]))[0])
 
 
 def _extent(parts: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -147,13 +186,14 @@ def _extent(parts: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _view(low: np.ndarray, high: np.ndarray, width_px: int, height_px: int) -> MapView:
-    """Grow the shorter side so metres are square on the image."""
+    """Grow the shorter side so metres are square on the map's box."""
+    left, top, box_width, box_height = map_box(width_px, height_px)
     span = high - low
-    metres_per_px = max(span[0] / width_px, span[1] / height_px)
+    metres_per_px = max(span[0] / box_width, span[1] / box_height)
     centre = (low + high) / 2
-    half = np.array([width_px, height_px]) * metres_per_px / 2
+    half = np.array([box_width, box_height]) * metres_per_px / 2
     return MapView((centre[0] - half[0], centre[0] + half[0]), (centre[1] - half[1], centre[1] + half[1]),
-                   width_px, height_px)
+                   box_width, box_height, left, top)
 
 
 def draw_map(
@@ -162,12 +202,13 @@ def draw_map(
     extra_paths: tuple[tuple[np.ndarray, tuple[float, float, float], str], ...] = (),
     title: str | None = None,
 ) -> MapView:
-    """Draw the scene from above at `time_s` into `out` (PNG); the view, for reading pixels back.
+    """Draw the scene from above at `time_s` into `out` (PNG, or the format its suffix names);
+    the view, for reading pixels back.
 
     `extra_points` (n, 2) are drawn like scan points (a SLAM map); `extra_paths`
     are (points (n, 2), rgb, label) lines (an estimated path)."""
     plt = pyplot()
-    from matplotlib.collections import PolyCollection
+    from matplotlib.collections import LineCollection, PolyCollection
 
     solids = [_footprint(obj.shape, _object_pose(scene, obj, time_s)) for obj in scene.objects]
     regions = [(_footprint(region.shape, region.pose), region.density) for region in scene.regions]
@@ -175,55 +216,75 @@ def draw_map(
     bodies = [body for body in scene.bodies if len(trajectory_times(body))]
     paths = [body_frames(scene, body.name, trajectory_times(body)).positions[:, :2] for body in bodies]
     here = [body_frames(scene, body.name, np.array([time_s])).positions[0, :2] for body in bodies]
-    points, pose = scan_points(scene, sensor, time_s) if sensor is not None else (np.zeros((0, 2)), None)
+    scan = scan_points(scene, sensor, time_s) if sensor is not None else None
 
     extent_parts = [f.triangles for f in solids if f.top_m > FLOOR_TOP_M] + [f.triangles for f, _ in regions]
     extent_parts += [p.centers[:, :2] for p in particles] + paths + [np.asarray(plume.source)[:2] for plume in scene.plumes]
     extent_parts += [np.asarray(spec.pose.position)[:2] for spec in scene.sensors if spec.body is None]
-    if pose is not None:
-        extent_parts.append(pose[:2])
+    if scan is not None:
+        extent_parts.append(scan.pose[:2])
     if not any(part.size for part in extent_parts):
         extent_parts = [f.triangles for f in solids] or [np.zeros((1, 2))]
     view = _view(*_extent(extent_parts), width_px, height_px)
 
     dpi = 100
     figure = plt.figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi, facecolor=BACKGROUND_RGB)
-    axes = figure.add_axes((0, 0, 1, 1))
+    axes = figure.add_axes((view.left_px / width_px, 1 - (view.top_px + view.height_px) / height_px,
+                            view.width_px / width_px, view.height_px / height_px))
     axes.set_xlim(*view.x_range)
     axes.set_ylim(*view.y_range)
-    axes.set_axis_off()
+    axes.set_xlabel("x (m)", labelpad=1)
+    axes.set_ylabel("y (m)", labelpad=1)
+    axes.tick_params(labelsize="small")
+    legend = _Legend()
     for footprint in sorted(solids, key=lambda f: f.top_m):
         grey = solid_grey(footprint.top_m)
         axes.add_collection(PolyCollection(footprint.triangles, facecolors=(grey,) * 3, edgecolors=(grey,) * 3,
                                            linewidths=0.3, zorder=1))
+    if solids:
+        legend.patch((solid_grey(SOLID_DARKEST_AT_M),) * 3, "solids (darker = taller)")
     densest = max((max(v for _, v in density.keyframes) for _, density in regions), default=0.0)
     for footprint, density in regions:
         alpha = smoke_alpha(float(density.at(time_s)), densest)
         if alpha > 0:
             axes.add_collection(PolyCollection([_outline(footprint)], facecolors=(*SMOKE_RGB, alpha),
                                                edgecolors="none", zorder=2))
+    if densest > 0:
+        legend.patch((*SMOKE_RGB, MAX_SMOKE_ALPHA), f"smoke density (darkest: {densest:.3g})")
     for cloud in particles:
         boxes = [np.array([[x - h, y - h], [x + h, y - h], [x + h, y + h], [x - h, y + h]])
                  for (x, y, _), h in zip(cloud.centers, cloud.half_sizes)]
         if boxes:
             axes.add_collection(PolyCollection(boxes, facecolors=(*PLUME_RGB, PLUME_ALPHA), edgecolors="none", zorder=3))
-    for body, path, position in zip(bodies, paths, here):
-        axes.plot(path[:, 0], path[:, 1], color=TRAJECTORY_RGB, linewidth=2, zorder=4, label=f"{body.name} trajectory")
+    if scene.plumes:
+        legend.patch((*PLUME_RGB, PLUME_ALPHA), "plume particles")
+    for path, position in zip(paths, here):
+        axes.plot(path[:, 0], path[:, 1], color=TRAJECTORY_RGB, linewidth=2, zorder=4)
         axes.plot(*position, "o", color=TRAJECTORY_RGB, markersize=9, zorder=6)
+    if bodies:
+        legend.line(TRAJECTORY_RGB, "trajectories (dot: now)", marker="o")
     for path, rgb, label in extra_paths:
-        axes.plot(path[:, 0], path[:, 1], color=rgb, linewidth=1.5, zorder=5, label=label)
+        axes.plot(path[:, 0], path[:, 1], color=rgb, linewidth=1.5, zorder=5)
+        legend.line(rgb, label)
     if extra_points is not None and len(extra_points):
         axes.plot(extra_points[:, 0], extra_points[:, 1], ".", color=SCAN_RGB, markersize=2, zorder=5)
-    if pose is not None:
-        axes.plot(points[:, 0], points[:, 1], ".", color=SCAN_RGB, markersize=3, zorder=7)
-        axes.plot(*pose[:2], "+", color=SENSOR_RGB, markersize=14, markeredgewidth=3, zorder=8)
-    label = title if title is not None else f"{scene.name}: t = {time_s:g} s" + (f", scan of {sensor}" if sensor else "")
-    axes.text(0.01, 0.99, label, transform=axes.transAxes, va="top", ha="left", fontsize=10,
-              bbox={"facecolor": "white", "alpha": 0.8, "edgecolor": "none"}, zorder=9)
-    scale = _scale_bar_m(view)
-    x0, y0 = view.x_range[1] - scale - 0.03 * (view.x_range[1] - view.x_range[0]), view.y_range[0] + 0.03 * (view.y_range[1] - view.y_range[0])
-    axes.plot([x0, x0 + scale], [y0, y0], color="black", linewidth=3, zorder=9)
-    axes.text(x0 + scale / 2, y0, f"{scale:g} m", ha="center", va="bottom", fontsize=9, zorder=9)
+        legend.line(SCAN_RGB, "map points", marker=".", linestyle="none")
+    if scan is not None:
+        axes.plot(scan.points[:, 0], scan.points[:, 1], ".", color=SCAN_RGB, markersize=3, zorder=7)
+        axes.plot(*scan.pose[:2], "+", color=SENSOR_RGB, markersize=14, markeredgewidth=3, zorder=8)
+        width_m = view.x_range[1] - view.x_range[0]
+        directions = np.column_stack([np.cos(scan.error_angles), np.sin(scan.error_angles)])
+        ticks = np.stack([scan.error_origins + ERROR_TICKS[0] * width_m * directions,
+                          scan.error_origins + ERROR_TICKS[1] * width_m * directions], axis=1)
+        axes.add_collection(LineCollection(ticks, colors=[ERROR_CODE_RGB], linewidths=1.0, zorder=7))
+        legend.line(SCAN_RGB, f"scan points of {sensor}", marker=".", linestyle="none")
+        legend.line(SENSOR_RGB, sensor, marker="+", linestyle="none", markeredgewidth=2)
+        legend.line(ERROR_CODE_RGB, f"error codes ({len(scan.error_angles)} beams)")
+    axes.set_title(title if title is not None else f"{scene.name}: t = {time_s:g} s" + (f", scan of {sensor}" if sensor else ""),
+                   fontsize=10, loc="left")
+    if legend.handles:
+        figure.legend(handles=legend.handles, loc="upper left", fontsize="small", frameon=False,
+                      bbox_to_anchor=((view.left_px + view.width_px + FRAME_GAP_PX / 2) / width_px, 1 - view.top_px / height_px))
     try:
         save_figure(figure, out, dpi=dpi, facecolor=BACKGROUND_RGB)
     finally:
@@ -231,8 +292,18 @@ def draw_map(
     return view
 
 
-def _scale_bar_m(view: MapView) -> float:
-    """A round length about a fifth of the image's width."""
-    target = (view.x_range[1] - view.x_range[0]) / 5
-    magnitude = 10 ** np.floor(np.log10(target))
-    return float(max(step * magnitude for step in (1, 2, 5) if step * magnitude <= target))
+class _Legend:
+    """The legend's entries, in the order things are drawn."""
+
+    def __init__(self) -> None:
+        self.handles: list = []
+
+    def patch(self, colour: tuple[float, ...], label: str) -> None:
+        from matplotlib.patches import Patch
+
+        self.handles.append(Patch(facecolor=colour, edgecolor="none", label=label))
+
+    def line(self, colour: tuple[float, ...], label: str, **style: object) -> None:
+        from matplotlib.lines import Line2D
+
+        self.handles.append(Line2D([], [], color=colour, label=label, **style))

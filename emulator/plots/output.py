@@ -45,6 +45,7 @@ def output_format(out: Path) -> str:
 
 def save_figure(figure: Any, out: Path, **savefig: Any) -> None:
     """`figure.savefig` into `out` in its suffix's format, whole or not at all."""
+    out = Path(out)
     fmt = output_format(out)
     partial = out.with_name(f".{out.name}.{os.getpid()}.part")
     try:

@@ -71,6 +71,7 @@ class SensorSeries:
     plume_range_m: np.ndarray
     has_regions: bool
     has_plumes: bool
+    has_camera_reference: bool = False  # the scene's run had a camera on a reference target
 
     @property
     def in_plume(self) -> np.ndarray:
@@ -130,6 +131,7 @@ def sensor_series(
         values=values, ranges_m=ranges, no_return=no_return, errors=is_code & ~no_return,
         mean_density=mean_density, plume_range_m=plume_range,
         has_regions=bool(scene.regions), has_plumes=bool(scene.plumes),
+        has_camera_reference=scene.camera_reference and bool(scene.regions),
     )
 
 
@@ -145,13 +147,26 @@ def pyplot() -> Any:
     return plt
 
 
+NEAREST_GREY, FARTHEST_GREY = 0.08, 0.95
+
+
 def waterfall_rgb(series: SensorSeries) -> np.ndarray:
     """(n, m, 3) image: grey by range (darker = shorter), red for errors, pale for no return."""
-    shade = 0.08 + 0.87 * np.clip(np.nan_to_num(series.ranges_m, nan=0.0) / series.max_range_m, 0.0, 1.0)
+    fraction = np.clip(np.nan_to_num(series.ranges_m, nan=0.0) / series.max_range_m, 0.0, 1.0)
+    shade = NEAREST_GREY + (FARTHEST_GREY - NEAREST_GREY) * fraction
     image = np.repeat(shade[:, :, None], 3, axis=2)
     image[series.no_return] = NO_RETURN_RGB
     image[series.errors] = ERROR_RGB
     return image
+
+
+def _range_colour_bar(figure: Any, bar_axes: Any, max_range_m: float) -> None:
+    """The range each grey stands for, nearest (darkest) at the bottom."""
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import LinearSegmentedColormap, Normalize
+
+    greys = LinearSegmentedColormap.from_list("range", [(NEAREST_GREY,) * 3, (FARTHEST_GREY,) * 3])
+    figure.colorbar(ScalarMappable(Normalize(0.0, max_range_m), greys), cax=bar_axes, label="range (m)")
 
 
 def draw_waterfall(series: SensorSeries, out: Path, *, width_px: int = 1200, height_px: int = 800, title: str = "") -> None:
@@ -160,9 +175,10 @@ def draw_waterfall(series: SensorSeries, out: Path, *, width_px: int = 1200, hei
     from matplotlib.patches import Patch
 
     dpi = 100
-    side = 2 * series.has_regions + series.has_plumes
+    side = series.has_regions + series.has_camera_reference + series.has_plumes
     figure = plt.figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi)
-    grid = figure.add_gridspec(1, 1 + side, width_ratios=[3] + [1] * side, wspace=0.12)
+    # the waterfall, its range colour bar, room for the bar's labels, then the side panels
+    grid = figure.add_gridspec(1, 3 + side, width_ratios=[3, 0.08, 0.22] + [1] * side, wspace=0.12)
     axes = figure.add_subplot(grid[0, 0])
     degrees = np.degrees(series.angles_rad)
     axes.imshow(
@@ -177,25 +193,28 @@ def draw_waterfall(series: SensorSeries, out: Path, *, width_px: int = 1200, hei
         handles=[Patch(color=ERROR_RGB, label="error code"), Patch(color=NO_RETURN_RGB, label="no return / beyond max")],
         loc="lower left", fontsize="small", framealpha=0.9,
     )
-    column = 1
+    _range_colour_bar(figure, figure.add_subplot(grid[0, 1]), series.max_range_m)
+    column = 3
     if series.has_regions:
         density_axes = figure.add_subplot(grid[0, column], sharey=axes)
         density_axes.plot(series.mean_density * 1000.0, series.times_s, color="tab:blue")
         density_axes.set_xlabel("mean density\nalong beams (10⁻³ d)")
         density_axes.tick_params(labelleft=False)
-        saturation_axes = figure.add_subplot(grid[0, column + 1], sharey=axes)
+        column += 1
+    if series.has_camera_reference:
+        saturation_axes = figure.add_subplot(grid[0, column], sharey=axes)
         saturation_axes.plot(series.saturation, series.times_s, color="tab:orange")
         saturation_axes.axvline(0.14, color="grey", linestyle="--", linewidth=0.8)
         saturation_axes.set_xlim(0.0, SATURATION_CLEAR + 0.05)
         saturation_axes.set_xlabel("camera saturation\n(assumed curve)")
         saturation_axes.tick_params(labelleft=False)
-        column += 2
+        column += 1
     if series.has_plumes:
         plume_axes = figure.add_subplot(grid[0, column], sharey=axes)
         plume_axes.plot(series.plume_share * 100.0, series.times_s, color="tab:green")
         plume_axes.set_xlabel("beams meeting\na plume (%)")
         plume_axes.tick_params(labelleft=False)
-    if series.has_regions:
+    if series.has_camera_reference:
         figure.text(0.01, 0.005, SATURATION_NOTE, fontsize="x-small", color="dimgrey")
     try:
         save_figure(figure, out, dpi=dpi)

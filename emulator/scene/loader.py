@@ -67,7 +67,7 @@ SHAPE_KEYS = ("box", "sphere", "cylinder", "mesh")
 ORIGIN: Vec3 = (0.0, 0.0, 0.0)
 
 TOP_KEYS = ("scene", "materials", "bodies", "objects", "smoke", "sensors")
-SCENE_KEYS = ("name", "description", "seed", "model", "density_to_extinction")
+SCENE_KEYS = ("name", "description", "seed", "model", "density_to_extinction", "camera_reference")
 SMOKE_KEYS = ("regions", "plumes")
 OBJECT_KEYS = ("name", *SHAPE_KEYS, "position", "rotation_deg", "material", "body")
 BODY_KEYS = ("name", "position", "rotation_deg", "trajectory")
@@ -427,6 +427,7 @@ def _build_scene(raw: dict[str, Any], path: Path) -> Scene:
         plumes=_plumes(plume_tables),
         sensors=sensors,
         bodies=bodies,
+        camera_reference=header.boolean("camera_reference", False),
     )
 
 

@@ -185,6 +185,7 @@ class Scene:
     plumes: tuple[Plume, ...]
     sensors: tuple[SensorSpec, ...]
     bodies: tuple[Body, ...] = ()
+    camera_reference: bool = False  # a camera watched a reference target in the run (plots add its saturation)
 
     def body(self, name: str) -> Body:
         for body in self.bodies:

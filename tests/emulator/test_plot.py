@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import matplotlib
 import matplotlib.image
 import numpy as np
 import pytest
@@ -162,3 +163,35 @@ def test_a_write_that_fails_midway_leaves_the_old_file_whole(tmp_path: Path, mon
         save_figure(Figure(), out)
     assert out.read_text() == "the old picture"
     assert [path.name for path in tmp_path.iterdir()] == ["x.svg"]
+
+
+def waterfall_texts(tmp_path: Path, scene: str, start_s: float) -> str:
+    """The waterfall of the scene's urg as SVG with its text kept as text."""
+    from emulator.plots.waterfall import draw_waterfall
+
+    out = tmp_path / f"{scene}.svg"
+    with matplotlib.rc_context({"svg.fonttype": "none"}):
+        draw_waterfall(sensor_series(load_scene(scene), "urg", start_s, start_s + 0.5), out, width_px=900, height_px=500)
+    return out.read_text()
+
+
+def test_the_waterfall_has_a_range_colour_bar(tmp_path: Path) -> None:
+    svg = waterfall_texts(tmp_path, "bocas", 71.0)
+    assert ">range (m)<" in svg
+    for tick in range(6):  # the URG-04LX's 0 to 5.6 m
+        assert f">{tick}<" in svg
+
+
+def test_camera_saturation_only_where_the_scene_has_a_camera_reference(tmp_path: Path) -> None:
+    """BOCAS had a camera on the paper target; the rescue arena has smoke regions but no camera."""
+    assert load_scene("bocas").camera_reference and not load_scene("rescue").camera_reference
+    bocas, rescue = waterfall_texts(tmp_path, "bocas", 71.0), waterfall_texts(tmp_path, "rescue", 30.0)
+    assert ">camera saturation" in bocas
+    assert ">mean density" in rescue and "camera saturation" not in rescue
+
+
+def test_camera_reference_is_true_or_false(tmp_path: Path) -> None:
+    scene = tmp_path / "x.toml"
+    scene.write_text('[scene]\ncamera_reference = "yes"\n[[sensors]]\nname = "urg"\nmodel = "urg-04lx"\n')
+    with pytest.raises(UserError, match=r'^x\.toml: scene\.camera_reference: expected true or false, got "yes"$'):
+        load_scene(scene)

@@ -6,12 +6,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import matplotlib
 import matplotlib.image
 import numpy as np
 import pytest
 
 from emulator.scene.smoke_scale import scale_smoke
 from emulator.plots.map import (
+    ERROR_CODE_RGB,
     MAX_SMOKE_ALPHA,
     TRAJECTORY_RGB,
     PLUME_ALPHA,
@@ -113,6 +115,7 @@ def test_solids_smoke_by_density_plume_particles_and_scan_are_where_they_are(sce
     row, column = view.pixel(2.5, 0.0)
     assert near(image[row - 3:row + 4, column - 4:column + 3], SCAN_RGB, 0.1).any()
     red = near(image, SCAN_RGB, 0.1)
+    red[:, view.left_px + view.width_px:] = False  # the legend's scan point
     south = view.pixel(0.0, -2.0)[0]  # below: the cart, 4.1 m off at 10 s, scanned where it is then
     cart_rows, cart_columns = np.nonzero(red[south:])
     assert len(cart_rows) > 10
@@ -130,7 +133,7 @@ def test_smoke_follows_the_time_asked_and_the_scale(scene_path: Path, tmp_path: 
     view = draw_map(scene, 0.0, early, width_px=800, height_px=600)
     image = matplotlib.image.imread(early)
     np.testing.assert_allclose(rgb_at(image, view.pixel(-3.0, 3.0)), [1.0, 1.0, 1.0], atol=0.01)  # density 0 at 0 s
-    assert not near(image, SCAN_RGB, 0.1).any()  # no --sensor, no scan
+    assert not near(image, SCAN_RGB, 0.1).any()  # no --sensor, no scan (nor its legend entry)
     halfway = tmp_path / "halfway.png"
     view = draw_map(scene, 5.0, halfway, width_px=800, height_px=600)
     np.testing.assert_allclose(rgb_at(matplotlib.image.imread(halfway), view.pixel(-3.0, 3.0)),
@@ -180,3 +183,62 @@ def test_plot_map_refuses_bad_options_in_one_line(scene_path: Path, tmp_path: Pa
     assert result.returncode == 2
     assert message in result.stderr and len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert not (tmp_path / "x.png").exists()
+
+
+def test_the_map_has_axes_in_metres_and_a_legend_of_what_it_draws(scene_path: Path, tmp_path: Path) -> None:
+    scene = load_scene(scene_path)
+    out = tmp_path / "map.svg"
+    with matplotlib.rc_context({"svg.fonttype": "none"}):  # text kept as text, to be read back
+        draw_map(scene, 10.0, out, sensor="urg", width_px=800, height_px=600)
+    svg = out.read_text()
+    for label in ("x (m)", "y (m)", "solids", "smoke density (darkest: 0.01)", "plume particles",
+                  "trajectories", "scan points of urg", "error codes"):
+        assert f">{label}" in svg, label
+    for tick in ("\u22124", "0", "2"):  # metres along the axes (matplotlib writes a true minus sign)
+        assert f">{tick}<" in svg, tick
+    png = tmp_path / "map.png"
+    view = draw_map(scene, 10.0, png, sensor="urg", width_px=800, height_px=600)
+    legend = matplotlib.image.imread(png)[:, view.left_px + view.width_px:]
+    for colour in (blend(SMOKE_RGB, MAX_SMOKE_ALPHA), blend(PLUME_RGB, PLUME_ALPHA), TRAJECTORY_RGB, SCAN_RGB,
+                   ERROR_CODE_RGB, [solid_grey(2.0)] * 3):
+        assert near(legend, colour, 0.03).any(), colour
+
+
+ERROR_SCENE = """\
+[[objects]]
+name = "post behind the smoke"
+box = { size = [0.4, 0.4, 2.0] }
+position = [3.0, 3.0, 1.0]
+
+[[objects]]
+name = "pillar in clear air"
+box = { size = [0.4, 0.4, 2.0] }
+position = [3.0, -1.0, 1.0]
+
+[[smoke.regions]]
+name = "block"
+box = { size = [1.0, 1.0, 2.0] }
+position = [1.5, 1.5, 1.0]
+density = 0.01
+
+[[sensors]]
+name = "urg"
+model = "urg-04lx"
+position = [0.0, 0.0, 0.3]
+"""
+
+
+def test_error_codes_are_ticks_towards_the_beams_that_returned_them(tmp_path: Path) -> None:
+    """The beams to the post cross 1.4 m of smoke at 0.01 d: error codes, drawn as ticks
+    pointing their way; those to the pillar measure it, those south meet nothing within
+    range (no return: not an error)."""
+    path = tmp_path / "errors.toml"
+    path.write_text(ERROR_SCENE)
+    out = tmp_path / "map.png"
+    view = draw_map(load_scene(path), 0.0, out, sensor="urg", width_px=800, height_px=600)
+    image = matplotlib.image.imread(out)
+    radius = 0.045 * (view.x_range[1] - view.x_range[0])
+    for degrees, failed in ((45.0, True), (-18.4, False), (-90.0, False)):
+        x, y = radius * np.cos(np.radians(degrees)), radius * np.sin(np.radians(degrees))
+        row, column = view.pixel(x, y)
+        assert near(image[row - 2:row + 3, column - 2:column + 3], ERROR_CODE_RGB, 0.1).any() == failed, degrees
