@@ -22,7 +22,7 @@ CASES = [
     # top level and [scene]
     ("colour = 1", "colour: unknown key (expected one of: scene, materials, bodies, objects, smoke, sensors)"),
     ('[scene]\nnmae = "a"',
-     "scene.nmae: unknown key (expected one of: name, description, seed, model, density_to_extinction)"),
+     "scene.nmae: unknown key (expected one of: name, description, seed, model, density_to_extinction, camera_reference)"),
     ("scene = 3", "scene: expected a table, got 3"),
     ("[scene]\nname = 3", "scene.name: expected a string, got 3"),
     ('[scene]\ndescription = """two\nlines"""', "scene.description: must be one line"),
