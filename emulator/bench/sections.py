@@ -25,6 +25,8 @@ object and `lines` are printed in the table. Add a section by adding it to `SECT
   first scan showing it, and a 100 Hz pose stream's cost on MD jitter.
 - fairness: the LMS200's scan rate and command latency while one client floods
   the URG with GDs and another writes 64 KiB/s of junk (`fairness`).
+- cola: CoLa-B streams through a served daemon (`cola_streams`): an LMS511 at
+  0.1667° under `physical`, and 4 TiM571 + 2 LMS111 at 50 Hz from one daemon.
 - memory: peak resident set size of this process (last, so it covers the others).
 """
 
@@ -237,6 +239,12 @@ def view_section(quick: bool) -> Section:
     return bench_section(quick)
 
 
+def cola_section(quick: bool) -> Section:
+    from emulator.bench.cola_streams import bench_section  # starts daemons: imported only when run
+
+    return bench_section(quick)
+
+
 def memory_section(quick: bool) -> Section:
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
     return {"peak_rss_mb": peak_mb}, [f"memory: peak RSS {peak_mb:.1f} MB (this process)"]
@@ -251,5 +259,6 @@ SECTIONS: dict[str, Callable[[bool], Section]] = {
     "control": control_section,
     "fairness": fairness_section,
     "view": view_section,
+    "cola": cola_section,
     "memory": memory_section,
 }

@@ -36,6 +36,7 @@ from typing import Any, Callable, Mapping, Protocol, Sequence
 from emulator.daemon.clock import WallClock
 from emulator.daemon.scan_cache import (
     PREFETCH_LEAD_S,
+    SCAN_BATCH,
     ScanCache,
     ScanObserver,
     SensorFactory,
@@ -47,7 +48,7 @@ from emulator.scene.live import ClockChange, LiveEvent, LiveState, event_record
 from emulator.scene.endpoints import Address, PtyAddress, Rfc2217Address, plan_endpoints
 from emulator.scene.model import Scene, SensorSpec
 from emulator.scene.sick_models import MODELS as SICK_MODELS
-from emulator.sensors import create_sensor, hokuyo_model
+from emulator.sensors import create_sensor, hokuyo_model, stream_batch
 from emulator.sensors.hokuyo import revolution_phase_ms
 from emulator.sensors.scan import Scan
 from emulator.transport.pty import PtyEndpoint
@@ -401,7 +402,8 @@ class Daemon:
         failures: list[str] = []
         for ordinal, (spec, addresses) in enumerate(self._plan):
             scans = self.scan_caches[spec.name] = ScanCache(
-                factory(spec), executor, phase=ordinal, observer=self._on_scan, defer=self._defer
+                factory(spec), executor, batch=stream_batch(spec) or SCAN_BATCH, phase=ordinal, observer=self._on_scan,
+                defer=self._defer,
             )
             for position, address in enumerate(addresses):
                 device = self._device_factory(spec, scans, phase_ms=self._phase_ms(spec))

@@ -6,7 +6,7 @@ import numpy as np
 
 from emulator.errors import UserError
 from emulator.optics import World
-from emulator.scene.model import Scene
+from emulator.scene.model import Scene, SensorSpec
 from emulator.scene import sick_models
 from emulator.sensors import lms200, sick_cola, urg04lx
 from emulator.sensors.hokuyo import HokuyoSensor
@@ -21,7 +21,7 @@ MODELS = (*HOKUYO_MODELS, lms200.MODEL, *sick_models.NAMES)
 
 __all__ = [
     "HOKUYO_MODELS", "ColaSensor", "HokuyoModel", "HokuyoSensor", "LmsSensor", "MODELS", "Scan", "Sensor", "UrgSensor",
-    "beam_times_s", "create_sensor", "hokuyo_model", "ranges_m",
+    "beam_times_s", "create_sensor", "hokuyo_model", "ranges_m", "stream_batch",
 ]  # fmt: skip
 
 
@@ -46,6 +46,13 @@ def create_sensor(scene: Scene, name: str, world: World | None = None) -> Sensor
     if spec.model in sick_models.MODELS:
         return ColaSensor(scene, spec, world)
     raise UserError(f"sensor {name!r}: unknown model {spec.model!r} (known: {', '.join(MODELS)})")
+
+
+def stream_batch(spec: SensorSpec) -> int | None:
+    """Scans of a steady stream a daemon computes per job, where the sensor needs fewer than its
+    default (None): a scan so dense that a whole batch would not be done one stride ahead of its first
+    scan (the LMS5xx at its finest)."""
+    return sick_cola.stream_batch(spec.options, spec.model) if spec.model in sick_models.MODELS else None
 
 
 def beam_times_s(scan: Scan) -> np.ndarray:
