@@ -44,7 +44,8 @@ from emulator.daemon.scan_cache import SCAN_BATCH
 from emulator.optics import World
 from emulator.scene import bundled_scenes, load_scene
 from emulator.scene.model import Scene, SensorSpec
-from emulator.sensors import Sensor, create_sensor, hokuyo_model, lms200
+from emulator.scene.sick_models import MODELS as SICK_MODELS
+from emulator.sensors import Sensor, create_sensor, hokuyo_model, lms200, sick_cola
 from emulator.sensors.beam_geometry import scan_plane_rays
 from emulator.sensors.mount import SensorMount
 from emulator.sensors.response import PRESET_MODULES, apply_model_override
@@ -82,6 +83,11 @@ def _sensor_beams(scene: Scene, spec: SensorSpec, world: World) -> tuple[np.ndar
     """Origins, directions and cast range of one scan of the sensor (a Hokuyo's valid steps; the LMS's window),
     from its pose at t = 0 (a sensor on a moving body: where the body starts)."""
     pose = SensorMount(scene, spec, world.bodies).frames(np.zeros(1)).at(0)
+    if spec.model in SICK_MODELS:
+        sick = SICK_MODELS[spec.model]
+        resolution_ticks = sick_cola.configured_request(spec.options)["resolution_ticks"]
+        origins, directions = scan_plane_rays(pose, np.radians(sick_cola.device_angles_deg(sick, resolution_ticks) - 90.0))
+        return origins, directions, sick.max_range_m
     hokuyo = hokuyo_model(spec.model)
     if hokuyo is not None:
         angles = hokuyo.step_angles_rad()[hokuyo.valid_steps]
@@ -137,7 +143,8 @@ def rays_section(quick: bool) -> Section:
 
 
 def _configured_stream(sensor: Sensor, times_s: list[float]) -> None:
-    """The scene-configured scan at each of `times_s`, computed together as the daemon's scan cache does."""
+    """The scene-configured scan at each of `times_s`, computed together as the daemon's scan cache does
+    (a CoLa sensor's `scans` default to its scene configuration)."""
     if isinstance(sensor, lms200.LmsSensor):
         sensor.scans(times_s, **lms200.configured_window(sensor.spec.options))
     else:

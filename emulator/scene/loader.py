@@ -693,16 +693,21 @@ def _option_of(key: str, model: str) -> str | None:
     return next((other for other, keys in OPTION_KEYS.items() if key in keys), None)
 
 
+def _plain(number: float) -> float | int:
+    """25.0 → 25, so a list of choices reads as a user writes them."""
+    return int(number) if float(number).is_integer() else number
+
+
 def _cola_options(table: _Table, model: str) -> dict[str, Any]:
     """A CoLa SICK's power-on scan configuration (one its datasheet offers), serial number, fog filter."""
     sick = SICK_MODELS[model]
     default_hz, default_res = sick.default[0] / FREQUENCY_TICKS_PER_HZ, sick.default[1] / ANGLE_TICKS_PER_DEG
-    frequencies = tuple(ticks / FREQUENCY_TICKS_PER_HZ for ticks in sick.scan_configs)
+    frequencies = tuple(_plain(ticks / FREQUENCY_TICKS_PER_HZ) for ticks in sick.scan_configs)
     frequency_hz = table.number_choice("scan_frequency_hz", default_hz, frequencies)
     offered = sick.scan_configs[int(round(frequency_hz * FREQUENCY_TICKS_PER_HZ))]
     resolution_deg = table.number_choice(
         "resolution_deg", default_res if sick.offers(int(round(frequency_hz * 100)), sick.default[1]) else offered[0] / ANGLE_TICKS_PER_DEG,
-        tuple(ticks / ANGLE_TICKS_PER_DEG for ticks in offered),
+        tuple(_plain(ticks / ANGLE_TICKS_PER_DEG) for ticks in offered),
     )
     serial = table.ascii_text("serial", "12345678", max_chars=8)
     if not serial.isdigit():

@@ -111,10 +111,16 @@ class ColaSensor:
         return self.scans((time_s,), **request)[0]
 
     def scans(
-        self, times_s: Sequence[float], *, frequency_ticks: int, resolution_ticks: int, fog_filter: bool = False
+        self, times_s: Sequence[float], *, frequency_ticks: int | None = None, resolution_ticks: int | None = None,
+        fog_filter: bool | None = None,
     ) -> list[Scan]:
-        """The whole field at each of `times_s`: every echo (distance counts) and its 16-bit RSSI;
-        `values` is the first echo as DIST1 carries it (0: none)."""
+        """The whole field at each of `times_s`: every echo (distance counts) and its intensity;
+        `values` is the first echo as DIST1 carries it (0: none). What is not given is the scene's
+        configuration (`configured_request`)."""
+        configured = configured_request(self.spec.options)
+        frequency_ticks = configured["frequency_ticks"] if frequency_ticks is None else frequency_ticks
+        resolution_ticks = configured["resolution_ticks"] if resolution_ticks is None else resolution_ticks
+        fog_filter = configured["fog_filter"] if fog_filter is None else fog_filter
         if not self.sick.offers(frequency_ticks, resolution_ticks):
             raise ValueError(f"{self.model} offers no scan at {frequency_ticks / 100:g} Hz, {resolution_ticks / 1e4:g}°")
         window = self._window(frequency_ticks, resolution_ticks)

@@ -8,6 +8,7 @@ import subprocess
 import sys
 
 from emulator.scene import bundled_scenes, load_scene
+from emulator.scene.sick_models import MODELS as SICK_MODELS
 
 
 def bench(*args: str) -> subprocess.CompletedProcess:
@@ -35,6 +36,8 @@ def test_bench_json_reports_every_bundled_sensor_and_every_section():
         spec = specs[row["scene"], row["sensor"]]
         if spec.model == "urg-04lx":
             assert row["period_ms"] == 100.0
+        elif spec.model in SICK_MODELS:  # a CoLa SICK: one turn per scan at its scan frequency
+            assert math.isclose(row["period_ms"], 1000.0 / float(spec.options["scan_frequency_hz"]))
         else:  # the mirror's revolutions (13.33 ms each) one scan at that resolution needs
             revolutions = {1.0: 1, 0.5: 2, 0.25: 4}[float(spec.options["resolution_deg"])]
             assert math.isclose(row["period_ms"], revolutions * 1000.0 / 75.0)
@@ -65,6 +68,10 @@ def test_bench_json_reports_every_bundled_sensor_and_every_section():
     assert all(row["rate"] > 0.5 and row["cpu_ms_per_scan"] > 0 for row in report["view"])
     assert all(row["loop_wakes"] > 0 and 0 <= row["loop_late_2ms"] <= 1 for row in report["view"])  # the daemon's counts
     assert report["view"][4]["mcap_bytes"] > 0
+    # CoLa streams: the fine LMS511, then the six units of one daemon, each with its figures
+    assert [(row["case"], row["client"]) for row in report["cola"]] == [("lms511-fine", "lms511")] + [
+        ("six-units", name) for name in ("tim0", "tim1", "tim2", "tim3", "lms0", "lms1")]
+    assert all(row["telegrams"] > 0 and row["jitter_p99_ms"] >= 0 for row in report["cola"])
 
 
 def test_bench_table_shows_only_the_chosen_sections():

@@ -119,6 +119,13 @@ CASES = [
     ('[[sensors]]\nname = "front"\nmodel = "uam-01lp"', 'sensors[0].model: must be one of "urg-04lx", "utm-30lx", "utm-30lx-ew", "ust-10lx", "ust-20lx", "lms200", "tim561", "tim571", "tim781", "lms111", "lms511", got "uam-01lp"'),
     (URG + "range = 4", "sensors[0].range: unknown key (expected one of: name, model, body, position, rotation_deg, endpoints, "
      "boot_protocol, serial, timing, baud, angle_deg, resolution_deg, units, type_string, firmware_profile, scan_frequency_hz, fog_filter)"),
+    ('[[sensors]]\nname = "s"\nmodel = "lms511"\nscan_frequency_hz = 75\nresolution_deg = 0.25',
+     "sensors[0].resolution_deg: must be one of 0.5, 1, got 0.25"),
+    ('[[sensors]]\nname = "s"\nmodel = "tim571"\nscan_frequency_hz = 25', "sensors[0].scan_frequency_hz: must be one of 15, got 25"),
+    ('[[sensors]]\nname = "s"\nmodel = "lms111"\nfog_filter = true',
+     "sensors[0].fog_filter: must be true or false (true only on an LMS5xx), got true"),
+    ('[[sensors]]\nname = "s"\nmodel = "lms111"\nserial = "12AB"', 'sensors[0].serial: must be up to 8 decimal digits, got "12AB"'),
+    ('[[sensors]]\nname = "s"\nmodel = "lms111"\nbaud = 9600', "sensors[0].baud: is an option of lms200, not of lms111"),
     (URG + URG, 'sensors[1].name: duplicate name "urg" (also sensors[0])'),
     (URG + 'endpoints = "pty:ttyURG0"', 'sensors[0].endpoints: expected a list of endpoints, got "pty:ttyURG0"'),
     (URG + "endpoints = [10940]", "sensors[0].endpoints[0]: expected a string, got 10940"),
