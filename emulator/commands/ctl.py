@@ -4,6 +4,7 @@
     ctl set region NAME density D          a smoke region holds D from now on
     ctl plume NAME on|off|rate R|wind X Y Z
     ctl pose BODY X Y [Z] [--yaw DEG]      a live body's pose
+    ctl twist BODY VX [VY] WZ [--for S]    drive a live body: m/s forward (and left), rad/s turning
     ctl clock [--speed X] [--pause|--resume]
     ctl watch SENSOR [--count N]           a line per scan
 """
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import time
 
 from emulator.control.ctl import DEFAULT_URL, ControlClient
 from emulator.errors import UserError
@@ -36,6 +38,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     pose.add_argument("name")
     pose.add_argument("position", nargs="+", type=float, metavar="X")
     pose.add_argument("--yaw", type=float, default=0.0, metavar="DEG")
+    twist = actions.add_parser(
+        "twist", help="twist BODY VX [VY] WZ [--for S]: drive a live body (m/s forward and left, rad/s counter-clockwise)"
+    )
+    twist.add_argument("name")
+    twist.add_argument("velocity", nargs="+", type=float, metavar="V")
+    twist.add_argument("--for", dest="duration", type=float, default=None, metavar="S",
+                       help="keep sending it for S wall seconds (else one command: the body stops after its watchdog)")
     clock = actions.add_parser("clock", help="clock [--speed X] [--pause|--resume]")
     clock.add_argument("--speed", type=float, default=None)
     running = clock.add_mutually_exclusive_group()
@@ -54,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
     if args.action == "watch":
         client.watch(args.sensor, args.count)
         return 0
+    if args.action == "twist":
+        return _twist(client, args)
     answer = _change(client, args)
     print(f"applied {json.dumps(answer['applied'])}")
     return 0
@@ -84,3 +95,24 @@ def _change(client: ControlClient, args: argparse.Namespace) -> dict:
     if not changes:
         raise UserError("clock: give --speed X, --pause or --resume")
     return client.clock(**changes)
+
+
+TWIST_REPEAT_S = 0.05  # `ctl twist --for`: a command every 50 ms, well inside the default 0.5 s watchdog
+
+
+def _twist(client: ControlClient, args: argparse.Namespace) -> int:
+    """One twist command, or (`--for S`) the same one repeated for S wall seconds, as a teleop does."""
+    if len(args.velocity) not in (2, 3):
+        raise UserError(f"twist: expected VX WZ or VX VY WZ, got {len(args.velocity)} numbers")
+    vx, vy, wz = (args.velocity[0], 0.0, args.velocity[1]) if len(args.velocity) == 2 else args.velocity
+    if args.duration is not None and not 0 <= args.duration <= 3600:
+        raise UserError(f"twist --for: expected 0..3600 seconds, got {args.duration:g}")
+    answer = client.twist(args.name, vx, vy, wz)
+    print(f"applied {json.dumps(answer['applied'])}")
+    if args.duration is not None:
+        end = time.monotonic() + args.duration
+        while (left := end - time.monotonic()) > 0:
+            time.sleep(min(TWIST_REPEAT_S, left))
+            answer = client.twist(args.name, vx, vy, wz)
+        print(f"last {json.dumps(answer['applied'])}, at {json.dumps(answer['state']['bodies'][args.name])}")
+    return 0

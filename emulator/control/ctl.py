@@ -62,6 +62,10 @@ class ControlClient:
     def pose(self, name: str, position: list[float], rotation_deg: list[float]) -> dict[str, Any]:
         return self.call("PUT", f"/api/bodies/{_quote(name)}/pose", {"position": position, "rotation_deg": rotation_deg})
 
+    def twist(self, name: str, vx: float, vy: float, wz: float) -> dict[str, Any]:
+        """Drive live body `name` at (vx, vy) m/s in its frame, turning at wz rad/s, until its watchdog."""
+        return self.call("PUT", f"/api/bodies/{_quote(name)}/twist", {"vx": vx, "vy": vy, "wz": wz})
+
     def clock(self, **changes: Any) -> dict[str, Any]:
         return self.call("PATCH", "/api/clock", changes)
 

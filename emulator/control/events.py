@@ -24,15 +24,18 @@ from pathlib import Path
 from typing import Any, Iterable, TextIO
 
 from emulator.errors import SceneError, UserError
-from emulator.scene.live import ClockChange, LiveEvent, PlumeChange, PoseChange, RegionChange, event_record
+from emulator.scene.drive import Twist
+from emulator.scene.live import ClockChange, LiveEvent, PlumeChange, PoseChange, RegionChange, TwistChange, event_record
 from emulator.scene.bodies import Live
 from emulator.scene.loader import checked_values
 from emulator.scene.model import Pose, Scene
 from emulator.sensors.scan import TICKS_PER_S
 
-OPS = ("region", "plume", "pose", "clock")
+OPS = ("region", "plume", "pose", "twist", "clock")
 PLUME_KEYS = ("emitting", "rate", "wind")
 POSE_KEYS = ("position", "rotation_deg", "yaw_deg")
+TWIST_KEYS = ("vx", "vy", "wz")
+RESOLVED_KEYS = ("until",)  # what the daemon adds to a twist when it applies it: not part of the log
 CLOCK_KEYS = ("speed", "paused")
 MAX_SPEED = 1000.0  # simulated seconds per wall second the API accepts
 TIME_DECIMALS = 6  # event times are on the µs grid
@@ -94,8 +97,30 @@ def change(scene: Scene, op: Any, name: Any, body: Any, time_s: float) -> LiveEv
     bodies = [body.name for body in scene.bodies]
     _known(name, bodies, "body", where)
     if name not in live_bodies(scene):
-        raise ControlError(409, f'{where}: its trajectory is not "live": its pose is not set from outside', where)
+        what = "pose is not set" if op == "pose" else "motion is not driven"
+        raise ControlError(409, f'{where}: its trajectory is not "live": its {what} from outside', where)
+    if op == "twist":
+        return TwistChange(time_s, name, _twist(where, body, scene.body(name).drive))
     return PoseChange(time_s, name, _pose(where, body))
+
+
+def _twist(where: str, body: Any, drive: Any) -> Twist:
+    """(vx, vy, wz), each 0 when left out, within the body's `drive` limits (a 400 naming the limit)."""
+    values = _values(f"{where}.twist", body, TWIST_KEYS)
+    _at_least_one(values, TWIST_KEYS, f"{where}.twist")
+    twist = Twist(*(_read(values.number, key, 0.0) for key in TWIST_KEYS))
+    speed = math.hypot(twist.vx, twist.vy)
+    if speed > drive.max_speed:
+        raise ControlError(
+            400, f"{where}.twist: speed {speed:g} m/s is over the body's limit {where}.drive.max_speed = {drive.max_speed:g} m/s",
+            f"{where}.drive.max_speed",
+        )
+    if abs(twist.wz) > drive.max_turn_rate:
+        raise ControlError(
+            400, f"{where}.twist.wz: {twist.wz:g} rad/s is over the body's limit {where}.drive.max_turn_rate = "
+            f"{drive.max_turn_rate:g} rad/s", f"{where}.drive.max_turn_rate",
+        )
+    return twist
 
 
 def _clock_change(body: Any, time_s: float, where: str) -> ClockChange:
@@ -155,8 +180,10 @@ def _short(value: Any) -> str:
 
 
 def event_json(event: LiveEvent) -> dict[str, Any]:
-    """One line of the event log: {"t", "op", "name", ...the body's keys}, t on the µs grid."""
-    return {**event_record(event), "t": round(event.time_s, TIME_DECIMALS)}
+    """One line of the event log: {"t", "op", "name", ...the body's keys}, t on the µs grid (what the
+    daemon derives when it applies a change, such as where a twist stops, is derived again on replay)."""
+    record = {key: value for key, value in event_record(event).items() if key not in RESOLVED_KEYS}
+    return {**record, "t": round(event.time_s, TIME_DECIMALS)}
 
 
 def event_from_json(scene: Scene, data: Any) -> LiveEvent:

@@ -32,6 +32,7 @@ from emulator.errors import UserError
 from emulator.scene.live import ClockChange, LiveEvent
 
 MAX_BODY_BYTES = 64 * 1024
+POSE_STREAM_HZ = 20.0  # `{"type": "poses"}` messages a second while a live body moves
 CLIENT_QUEUE_MESSAGES = 32  # outgoing messages a WebSocket client may fall behind by before it is dropped
 # The kernel's send buffer of a WebSocket client: what a client that stops reading can hold
 # besides its queue (loopback autotuning would let it grow to megabytes).
@@ -95,6 +96,7 @@ class ControlServer:
         self._state_pending = False
         self._runner: web.AppRunner | None = None
         self._unlisten = session.listen(self._changed)
+        self._pose_stream: asyncio.Task | None = None
 
     async def start(self) -> ControlAddress:
         """Listen; the address actually bound (a port 0 resolved). UserError if it cannot."""
@@ -103,6 +105,7 @@ class ControlServer:
         app.router.add_get("/api/state", self._state)
         app.router.add_get("/api/events", self._events)
         app.router.add_put("/api/bodies/{name}/pose", self._change_handler("pose"))
+        app.router.add_put("/api/bodies/{name}/twist", self._change_handler("twist"))
         app.router.add_patch("/api/smoke/regions/{name}", self._change_handler("region"))
         app.router.add_patch("/api/smoke/plumes/{name}", self._change_handler("plume"))
         app.router.add_patch("/api/clock", self._change_handler("clock"))
@@ -122,10 +125,15 @@ class ControlServer:
         sockets = site._server.sockets if site._server is not None else []  # type: ignore[union-attr]
         port = sockets[0].getsockname()[1] if sockets else self.address.port
         self.address = ControlAddress(self.address.host, port)
+        live = self.session.daemon.live
+        if live is not None and live.bodies.live_names:
+            self._pose_stream = asyncio.get_running_loop().create_task(self._stream_poses())
         return self.address
 
     async def close(self) -> None:
         self._unlisten()
+        if self._pose_stream is not None:
+            self._pose_stream.cancel()
         self.feed.close()
         for client in list(self._clients):
             await client.close()
@@ -258,6 +266,22 @@ class ControlServer:
 
     def _state_message(self) -> str:
         return json.dumps({"type": "state", **self.session.state()})
+
+    async def _stream_poses(self) -> None:
+        """While a live body moves by a twist, its pose to every client POSE_STREAM_HZ times a second
+        (and once more when it has stopped), as `{"type": "poses", "time_s", "bodies": {name: pose}}`."""
+        moved = False
+        while True:
+            await asyncio.sleep(1.0 / POSE_STREAM_HZ)
+            if not self._clients:
+                continue
+            poses = self.session.live_poses()
+            moving = any(any(pose["twist"].values()) for pose in poses["bodies"].values())
+            if moving or moved:
+                message = json.dumps({"type": "poses", **poses})
+                for client in list(self._clients):
+                    client.offer(message)
+            moved = moving
 
 
 class _Client:

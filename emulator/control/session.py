@@ -44,14 +44,14 @@ class LiveSession:
         if self.daemon.live is None and op != "clock":
             raise ControlError(409, "this daemon serves recorded scans: its world cannot change", "op")
         event = change(self.scene, op, name, body, change_instant(self.daemon.clock.now()))
-        self.apply(event)
-        return event
+        return self.apply(event)
 
-    def apply(self, event: LiveEvent) -> None:
-        """Apply an event (checked already, e.g. read from a log) and record it; ControlError 409
-        for a live pose stamped before the body's last one (a log replayed ahead of now)."""
+    def apply(self, event: LiveEvent) -> LiveEvent:
+        """Apply an event (checked already, e.g. read from a log) and record it; the event as applied
+        (a twist with where it stops). ControlError 409 for a live pose or twist stamped before the
+        body's last one (a log replayed ahead of now)."""
         try:
-            self.daemon.apply(event)
+            event = self.daemon.apply(event)
         except ValueError as error:
             raise ControlError(409, str(error), f"bodies[{event.name}]") from None
         self.events.append(event)
@@ -59,6 +59,7 @@ class LiveSession:
             self._writer.write(event)
         for listener in list(self._listeners):
             listener(event)
+        return event
 
     def close(self) -> None:
         if self._writer is not None:
@@ -86,6 +87,8 @@ class LiveSession:
         if live is not None:
             for body in self.scene.bodies:
                 state["bodies"][body.name] = pose_json(live.body_pose(body.name, now))
+                if body.name in live.bodies.live_names:
+                    state["bodies"][body.name]["twist"] = dataclasses.asdict(live.body_twist(body.name, now))
             for index, region in enumerate(self.scene.regions):
                 state["regions"][region.name] = {"density": live.region_density(index, now)}
             for plume in self.scene.plumes:
@@ -93,6 +96,15 @@ class LiveSession:
         for spec in self.scene.sensors:
             state["sensors"][spec.name] = {"pose": pose_json(spec.pose), "clients": self.daemon.clients(spec.name)}
         return state
+
+    def live_poses(self) -> dict[str, Any]:
+        """The live bodies' poses and twists now: `{"time_s", "bodies": {name: {"position", "rotation_deg", "twist"}}}`."""
+        now = self.daemon.clock.now()
+        live = self.daemon.live
+        bodies = {}
+        for name in live.bodies.live_names if live is not None else ():
+            bodies[name] = {**pose_json(live.body_pose(name, now)), "twist": dataclasses.asdict(live.body_twist(name, now))}
+        return {"time_s": round(now, 6), "bodies": bodies}
 
     def scene_json(self) -> dict[str, Any]:
         """`GET /api/scene`: the loaded scene as plain JSON."""

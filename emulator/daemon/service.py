@@ -382,6 +382,8 @@ class Daemon:
         self.live: LiveState | None = self.world.live if self.world is not None else None
         if sensor_factory is None and self.world is None:
             self.live = LiveState(scene)
+        if self.live is not None:
+            self.live.prepare_obstacles()  # now, rather than on the loop at a live body's first twist
         self._before_workers: list[LiveEvent] = []  # world events applied before the workers started
         self.scan_caches: dict[str, ScanCache] = {}  # per sensor served, once started
         self._endpoint_sensors: list[tuple[str, PtyEndpoint | TcpEndpoint]] = []
@@ -502,24 +504,26 @@ class Daemon:
     def stop(self) -> None:
         self._stopped.set()
 
-    def apply(self, event: LiveEvent) -> None:
+    def apply(self, event: LiveEvent) -> LiveEvent:
         """A live change from its instant on: the world takes it (here, or in every worker), and
         every scan computed at or after that instant is computed again; a clock change reschedules
-        every device. ValueError for a live pose stamped before the body's last one."""
+        every device. The event as applied (a twist with the instant it stops: workers are sent
+        that). ValueError for a live pose or twist stamped before the body's last one."""
         if isinstance(event, ClockChange):
             self.clock.set(speed=event.speed, paused=event.paused)
             for session in self.sessions:
                 session.reschedule()
-            return
+            return event
         if self.live is None:
             raise UserError("this daemon serves recorded scans: its world cannot change")
-        self.live.apply(event)
+        event = self.live.apply(event)
         if self.pool is not None:
             self.pool.apply([event_record(event)])  # queued before the scans submitted below
         elif self.world is None:
             self._before_workers.append(event)
         for scans in self.scan_caches.values():
             scans.invalidate_from(event.time_s)
+        return event
 
     def clients(self, sensor: str) -> int:
         """How many clients are connected to the sensor's endpoints."""

@@ -71,10 +71,11 @@ class World:
         self.live = LiveState(scene, self.bodies)
         self._particles: OrderedDict[tuple[int, float], Particles] = OrderedDict()
 
-    def apply(self, event: WorldEvent) -> None:
-        """A live change, in force from its instant on (scans at or after it must be recomputed).
-        ValueError for a pose stamped before the body's last one (live poses only move forward)."""
-        self.live.apply(event)
+    def apply(self, event: WorldEvent) -> WorldEvent:
+        """A live change, in force from its instant on (scans at or after it must be recomputed); the
+        event as applied (a twist resolved). ValueError for a pose or twist stamped before the body's
+        last one (live bodies only move forward)."""
+        return self.live.apply(event)
 
     def _rides_moving_body(self, body: str | None) -> bool:
         return body is not None and self.scene.body(body).moving

@@ -10,13 +10,18 @@ one vectorised pass (no per-beam Python).
   linear and the rotation follows the shortest arc (slerp); before the first
   and after the last row the pose is held; two rows at one time are a jump
   (the later row holds from that instant on).
-- `LIVE`: the pose is driven from outside while `serve` runs. The seam for the
-  control API is `BodyPoses.add_live_pose(body, time_s, pose)`: it appends one
-  event to the body's ordered event list (times must not decrease), and
+- `LIVE`: the pose is driven from outside while `serve` runs. The seams for the
+  control API are `BodyPoses.add_live_pose(body, time_s, pose)` and
+  `add_live_twist(body, time_s, twist, until_s)`: each appends one event to
+  the body's ordered event list (times must not decrease): a pose, and the
+  velocity (vx, vy, wz) that moves it from there until `until_s` (zero for a
+  pose; for a twist, when its watchdog or a solid stops it: scene/obstacles.py).
   `live_frames(times, events, initial)` is the pure function that turns that
-  list into poses: each event's pose holds from its time until the next
-  event's, the body's scene pose before the first. Evaluating instant t never
-  looks at events after t, so replaying the same event log gives the same scans.
+  list into poses: from each event's time until the next event's, its pose
+  moved along its twist's closed-form arc (scene/drive.py) for the time
+  elapsed, up to `until_s`; the body's scene pose before the first. Evaluating
+  instant t never looks at events after t, so replaying the same event log
+  gives the same scans.
 
 Quaternions are (x, y, z, w) as in TUM files; rotations compose as
 R = Rz(yaw) · Ry(pitch) · Rx(roll), as `Pose.rotation_matrix`.
@@ -31,6 +36,7 @@ from typing import Union
 
 import numpy as np
 
+from emulator.scene.drive import Drive, Twist, planar_motion
 from emulator.scene.model import Pose
 
 _SLERP_LINEAR_BELOW = 1e-9  # sin of the arc under which slerp falls back to a normalised lerp
@@ -261,27 +267,50 @@ def _still_pose(keyframes: Keyframes, times: np.ndarray) -> int | None:
 
 @dataclass(frozen=True, eq=False)
 class LiveEvents:
-    """An ordered list of live pose events: `times` (E,), `positions` (E, 3), `quaternions` (E, 4)."""
+    """An ordered list of live events: `times` (E,), the pose then, `positions` (E, 3) and
+    `quaternions` (E, 4), the `twists` (E, 3) of (vx, vy, wz) moving it from there, and `until` (E,),
+    the instant that motion ends (the event's own time for a pose)."""
 
     times: np.ndarray
     positions: np.ndarray
     quaternions: np.ndarray
+    twists: np.ndarray
+    until: np.ndarray
 
     @staticmethod
     def empty() -> LiveEvents:
-        return LiveEvents(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 4)))
+        return LiveEvents(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 4)), np.zeros((0, 3)), np.zeros(0))
 
 
-def live_frames(events: LiveEvents, initial: Pose, times_s: np.ndarray) -> Frames:
-    """The live pose at each of `times_s`: the last event at or before t, `initial` before the first."""
+def live_poses(events: LiveEvents, initial: Pose, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions (T, 3) and quaternions (T, 4) of the live body at each of `times_s` (module docstring)."""
     times = np.asarray(times_s, dtype=float).reshape(-1)
     index = np.searchsorted(events.times, times, side="right") - 1
     positions = np.broadcast_to(np.asarray(initial.position, dtype=float), (len(times), 3)).copy()
-    rotations = np.broadcast_to(initial.rotation_matrix(), (len(times), 3, 3)).copy()
-    seen = index >= 0
-    if seen.any():
-        positions[seen] = events.positions[index[seen]]
-        rotations[seen] = quaternion_matrix(events.quaternions[index[seen]])
+    quaternions = np.broadcast_to(euler_quaternion(initial.rotation_deg), (len(times), 4)).copy()
+    seen = np.flatnonzero(index >= 0)
+    if len(seen):
+        rows = index[seen]
+        elapsed = np.maximum(np.minimum(times[seen], events.until[rows]) - events.times[rows], 0.0)
+        positions[seen], quaternions[seen] = planar_motion(
+            events.positions[rows], events.quaternions[rows], events.twists[rows], elapsed
+        )
+    return positions, quaternions
+
+
+def live_frames(events: LiveEvents, initial: Pose, times_s: np.ndarray) -> Frames:
+    """The live pose at each of `times_s`: the last event's pose at or before t moved by its twist,
+    `initial` before the first."""
+    times = np.asarray(times_s, dtype=float).reshape(-1)
+    index = np.searchsorted(events.times, times, side="right") - 1
+    if not (index >= 0).any():
+        return Frames(
+            np.broadcast_to(np.asarray(initial.position, dtype=float), (len(times), 3)).copy(),
+            np.broadcast_to(initial.rotation_matrix(), (len(times), 3, 3)).copy(),
+        )
+    positions, quaternions = live_poses(events, initial, times)
+    rotations = quaternion_matrix(quaternions)
+    rotations[index < 0] = initial.rotation_matrix()
     return Frames(positions, rotations)
 
 
@@ -290,11 +319,13 @@ def live_frames(events: LiveEvents, initial: Pose, times_s: np.ndarray) -> Frame
 
 @dataclass(frozen=True)
 class Body:
-    """A rigid frame: `pose` when no trajectory applies; `trajectory` None (it stays), keyframes or LIVE."""
+    """A rigid frame: `pose` when no trajectory applies; `trajectory` None (it stays), keyframes or LIVE.
+    A live body also takes twists, with `drive`'s footprint, limits and watchdog."""
 
     name: str
     pose: Pose = Pose()
     trajectory: Trajectory | None = None
+    drive: Drive = Drive()
 
     @property
     def moving(self) -> bool:
@@ -304,30 +335,31 @@ class Body:
 class _EventLog:
     """Append-only arrays with amortised O(1) appends; a snapshot never changes after it is taken."""
 
+    _COLUMNS = {"times": (), "positions": (3,), "quaternions": (4,), "twists": (3,), "until": ()}
+
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._count = 0
-        self._times = np.zeros(16)
-        self._positions = np.zeros((16, 3))
-        self._quaternions = np.zeros((16, 4))
+        self._arrays = {name: np.zeros((16, *shape)) for name, shape in self._COLUMNS.items()}
 
-    def append(self, time_s: float, position: np.ndarray, quaternion: np.ndarray) -> None:
+    def append(self, time_s: float, position: np.ndarray, quaternion: np.ndarray,
+               twist: np.ndarray = np.zeros(3), until_s: float | None = None) -> None:
         with self._lock:
-            if self._count and time_s < self._times[self._count - 1]:
-                raise ValueError(f"live pose at {time_s} s is earlier than the last one ({self._times[self._count - 1]} s)")
-            if self._count == len(self._times):  # grow into new arrays: earlier snapshots keep the old ones
-                self._times = np.concatenate([self._times, np.zeros(self._count)])
-                self._positions = np.concatenate([self._positions, np.zeros((self._count, 3))])
-                self._quaternions = np.concatenate([self._quaternions, np.zeros((self._count, 4))])
-            self._times[self._count] = time_s
-            self._positions[self._count] = position
-            self._quaternions[self._count] = quaternion
+            times = self._arrays["times"]
+            if self._count and time_s < times[self._count - 1]:
+                raise ValueError(f"live pose at {time_s} s is earlier than the last one ({times[self._count - 1]} s)")
+            if self._count == len(times):  # grow into new arrays: earlier snapshots keep the old ones
+                self._arrays = {name: np.concatenate([array, np.zeros_like(array)]) for name, array in self._arrays.items()}
+            row = {"times": time_s, "positions": position, "quaternions": quaternion, "twists": twist,
+                   "until": time_s if until_s is None else until_s}
+            for name, value in row.items():
+                self._arrays[name][self._count] = value
             self._count += 1
 
     def snapshot(self) -> LiveEvents:
         with self._lock:
             n = self._count
-            return LiveEvents(self._times[:n], self._positions[:n], self._quaternions[:n])
+            return LiveEvents(**{name: array[:n] for name, array in self._arrays.items()})
 
 
 @dataclass
@@ -343,6 +375,10 @@ class BodyPoses:
 
     def body(self, name: str) -> Body:
         return self._by_name[name]
+
+    @property
+    def live_names(self) -> tuple[str, ...]:
+        return tuple(self._live)
 
     def frames(self, name: str, times_s: np.ndarray) -> Frames:
         """Body `name`'s pose at each of `times_s` (T,), vectorised."""
@@ -362,6 +398,29 @@ class BodyPoses:
         if name not in self._live:
             raise KeyError(f"no live body named {name!r} (live: {', '.join(self._live) or 'none'})")
         self._live[name].append(float(time_s), np.asarray(pose.position, dtype=float), euler_quaternion(pose.rotation_deg))
+
+    def add_live_twist(self, name: str, time_s: float, twist: Twist, until_s: float) -> None:
+        """Record that live body `name` moves by `twist` from where it is at `time_s` until `until_s`."""
+        position, quaternion = self.live_pose(name, time_s)
+        self._live_log(name).append(float(time_s), position, quaternion, np.array([twist.vx, twist.vy, twist.wz]), float(until_s))
+
+    def live_pose(self, name: str, time_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Live body `name`'s position (3,) and quaternion (4,) at `time_s`, from its events so far."""
+        positions, quaternions = live_poses(self._live_log(name).snapshot(), self._by_name[name].pose, np.array([time_s]))
+        return positions[0], quaternions[0]
+
+    def live_twist(self, name: str, time_s: float) -> Twist:
+        """The twist moving live body `name` at `time_s` (zero when it stands)."""
+        events = self._live_log(name).snapshot()
+        index = int(np.searchsorted(events.times, time_s, side="right")) - 1
+        if index < 0 or time_s >= events.until[index]:
+            return Twist()
+        return Twist(*(float(value) for value in events.twists[index]))
+
+    def _live_log(self, name: str) -> _EventLog:
+        if name not in self._live:
+            raise KeyError(f"no live body named {name!r} (live: {', '.join(self._live) or 'none'})")
+        return self._live[name]
 
     def live_events(self, name: str) -> LiveEvents:
         """The events recorded for live body `name` so far."""

@@ -10,8 +10,11 @@ stay correct as long as scans at or after a new event's instant are
 recomputed (the daemon's scan caches drop them).
 
 `LiveState` holds the events applied so far, per region and plume (a live
-body's poses go to its `BodyPoses`, scene/bodies.py), and answers "what holds
-at t". Events of one item normally arrive in time order; a density or plume
+body's poses and twists go to its `BodyPoses`, scene/bodies.py), and answers
+"what holds at t". A twist is resolved when it is applied: it holds until the
+body's watchdog or, earlier, until the body's footprint touches a solid
+(scene/obstacles.py); the resolved event carries that instant (`until_s`), so
+worker processes given it move their copies of the body without the solids. Events of one item normally arrive in time order; a density or plume
 change stamped before that item's later changes (a log replayed ahead, then a
 change made by hand) replaces them, as a density change drops the scene's
 keyframes after it; live poses only move forward.
@@ -24,13 +27,18 @@ the same events to their own worlds.
 from __future__ import annotations
 
 import bisect
+import dataclasses
+import functools
 import threading
 from dataclasses import dataclass, field
 from typing import Union
 
 from typing import Any
 
+import numpy as np
 from emulator.scene.bodies import BodyPoses
+from emulator.scene.drive import Twist
+from emulator.scene.obstacles import Obstacles
 from emulator.scene.model import Plume, Pose, Scene, Vec3
 from emulator.scene.plumes import EmissionSegment, scene_emission
 
@@ -75,6 +83,19 @@ class PoseChange:
 
 
 @dataclass(frozen=True)
+class TwistChange:
+    """From `time_s` on, live body `name` moves by `twist` (its frame) from where it then is, until
+    `until_s`: its watchdog, or a solid it touches (None until the event is resolved by `LiveState`)."""
+
+    time_s: float
+    name: str
+    twist: Twist
+    until_s: float | None = None
+
+    op = "twist"
+
+
+@dataclass(frozen=True)
 class ClockChange:
     """At `time_s` the clock's speed and/or pause changed; scans do not depend on it (logged for the record)."""
 
@@ -86,8 +107,8 @@ class ClockChange:
     name = ""
 
 
-LiveEvent = Union[RegionChange, PlumeChange, PoseChange, ClockChange]
-WorldEvent = Union[RegionChange, PlumeChange, PoseChange]
+LiveEvent = Union[RegionChange, PlumeChange, PoseChange, TwistChange, ClockChange]
+WorldEvent = Union[RegionChange, PlumeChange, PoseChange, TwistChange]
 
 
 @dataclass
@@ -129,14 +150,18 @@ class LiveState:
         self._plumes = {plume.name: _Track() for plume in scene.plumes}
         self._segments: dict[str, tuple[EmissionSegment, ...] | None] = {plume.name: None for plume in scene.plumes}
 
-    def apply(self, event: WorldEvent) -> None:
-        """Take `event` into account from its instant on (validated by the caller: names exist).
-        ValueError for a pose stamped before the body's last one."""
-        if isinstance(event, PoseChange):
-            self.bodies.add_live_pose(event.name, event.time_s, event.pose)
+    def apply(self, event: WorldEvent) -> WorldEvent:
+        """Take `event` into account from its instant on (validated by the caller: names exist); the
+        event as applied (a twist resolved). ValueError for a pose or twist stamped before the body's last one."""
+        if isinstance(event, (PoseChange, TwistChange)):
+            if isinstance(event, PoseChange):
+                self.bodies.add_live_pose(event.name, event.time_s, event.pose)
+            else:
+                event = self.resolved(event)
+                self.bodies.add_live_twist(event.name, event.time_s, event.twist, event.until_s)
             with self._lock:
                 self.generation += 1
-            return
+            return event
         with self._lock:
             if isinstance(event, RegionChange):
                 self._regions[event.name].add(event.time_s, event)
@@ -148,6 +173,37 @@ class LiveState:
             else:
                 raise TypeError(f"not a world event: {event!r}")
             self.generation += 1
+        return event
+
+    def resolved(self, event: TwistChange) -> TwistChange:
+        """The twist with the instant it stops: its watchdog, or the first contact with a solid before.
+        ValueError when it is stamped before the body's last event."""
+        if event.until_s is not None:
+            return event
+        last = self.bodies.live_events(event.name).times
+        if len(last) and event.time_s < last[-1]:
+            raise ValueError(f"live twist at {event.time_s} s is earlier than the body's last event ({last[-1]} s)")
+        drive = self.bodies.body(event.name).drive
+        position, quaternion = self.bodies.live_pose(event.name, event.time_s)
+        twist = np.array([event.twist.vx, event.twist.vy, event.twist.wz])
+        moving_s = self.obstacles.travel_time(drive, position, quaternion, twist, drive.watchdog_s)
+        return dataclasses.replace(event, until_s=event.time_s + moving_s)
+
+    @functools.cached_property
+    def obstacles(self) -> Obstacles:
+        """The solids that stop driven bodies (built at the first twist, or by `prepare_obstacles`)."""
+        return Obstacles(self.scene)
+
+    def prepare_obstacles(self) -> None:
+        """Cut the solids for every live body's footprint at its scene height now, not at its first twist."""
+        for body in self.scene.bodies:
+            if body.name in self.bodies.live_names:
+                z = body.pose.position[2]
+                self.obstacles.outlines(z + body.drive.clearance, z + body.drive.height)
+
+    def body_twist(self, name: str, time_s: float) -> Twist:
+        """The twist moving live body `name` at `time_s` (zero when it stands)."""
+        return self.bodies.live_twist(name, time_s)
 
     def region_density(self, index: int, time_s: float) -> float:
         """Region `index`'s density at `time_s`: its last live change, else the scene's keyframes."""
@@ -238,6 +294,10 @@ def event_record(event: LiveEvent) -> dict[str, Any]:
             value = getattr(event, key)
             if value is not None:
                 record[key] = list(value) if key == "wind" else value
+    elif isinstance(event, TwistChange):
+        record.update(vx=event.twist.vx, vy=event.twist.vy, wz=event.twist.wz)
+        if event.until_s is not None:
+            record["until"] = event.until_s
     else:
         record["position"] = list(event.pose.position)
         record["rotation_deg"] = list(event.pose.rotation_deg)
@@ -257,4 +317,6 @@ def event_from_record(record: dict[str, Any]) -> LiveEvent:
                            tuple(wind) if wind is not None else None)
     if op == "pose":
         return PoseChange(time_s, record["name"], Pose(tuple(record["position"]), tuple(record["rotation_deg"])))
+    if op == "twist":
+        return TwistChange(time_s, record["name"], Twist(record["vx"], record["vy"], record["wz"]), record.get("until"))
     raise ValueError(f"unknown live event op {op!r}")

@@ -31,6 +31,8 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from emulator.errors import SceneError, UserError
 from emulator.scene.bodies import LIVE, Body, Keyframes, Trajectory, euler_quaternion
+from emulator.scene import drive as drive_defaults
+from emulator.scene.drive import Drive
 from emulator.scene.endpoints import Address, EndpointClaims, parse_endpoint
 
 ENDPOINT_SYNTAX = '"pty:PATH", "tcp:HOST:PORT" or "rfc2217:HOST:PORT" with PORT 0..65535'
@@ -70,7 +72,8 @@ TOP_KEYS = ("scene", "materials", "bodies", "objects", "smoke", "sensors")
 SCENE_KEYS = ("name", "description", "seed", "model", "density_to_extinction", "camera_reference")
 SMOKE_KEYS = ("regions", "plumes")
 OBJECT_KEYS = ("name", *SHAPE_KEYS, "position", "rotation_deg", "material", "body")
-BODY_KEYS = ("name", "position", "rotation_deg", "trajectory")
+BODY_KEYS = ("name", "position", "rotation_deg", "trajectory", "drive")
+DRIVE_KEYS = ("radius", "height", "clearance", "max_speed", "max_turn_rate", "watchdog")
 TRAJECTORY_KEYS = ("keyframes", "file")
 PLANAR_ROW = 4  # [t, x, y, yaw_deg]
 FULL_ROW = 7  # [t, x, y, z, roll_deg, pitch_deg, yaw_deg]
@@ -754,8 +757,27 @@ def _bodies(tables: list[_Table], scene_dir: Path) -> tuple[Body, ...]:
         name = table.name(seen)
         pose = table.pose()
         trajectory = _trajectory(table, pose, scene_dir) if "trajectory" in table else None
-        bodies.append(Body(name, pose, trajectory))
+        if "drive" in table and trajectory is not LIVE:
+            raise table.place.key("drive").error('only a body with trajectory = "live" is driven by twists')
+        drive = _drive(table.table("drive", DRIVE_KEYS)) if "drive" in table else Drive()
+        bodies.append(Body(name, pose, trajectory, drive))
     return tuple(bodies)
+
+
+def _drive(table: _Table) -> Drive:
+    """A live body's footprint, speed limits and watchdog (scene/drive.py); defaults for what is left out."""
+    radius = table.number("radius", drive_defaults.DEFAULT_RADIUS_M, above=0, at_most=MAX_EXTENT_M)
+    clearance = table.number("clearance", drive_defaults.DEFAULT_CLEARANCE_M, at_least=0, at_most=MAX_EXTENT_M)
+    height = table.number("height", drive_defaults.DEFAULT_HEIGHT_M, above=clearance, at_most=MAX_EXTENT_M)
+    return Drive(
+        radius=radius,
+        height=height,
+        clearance=clearance,
+        max_speed=table.number("max_speed", drive_defaults.DEFAULT_MAX_SPEED, above=0, at_most=drive_defaults.MAX_BODY_SPEED),
+        max_turn_rate=table.number("max_turn_rate", drive_defaults.DEFAULT_MAX_TURN_RATE, above=0,
+                                   at_most=drive_defaults.MAX_BODY_TURN_RATE),
+        watchdog_s=table.number("watchdog", drive_defaults.DEFAULT_WATCHDOG_S, above=0, at_most=drive_defaults.MAX_WATCHDOG_S),
+    )
 
 
 def _check_bodies_carry(

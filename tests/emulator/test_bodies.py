@@ -35,7 +35,7 @@ def write(directory: Path, text: str, name: str = "x.toml") -> Path:
 # --------------------------------------------------------------------------- the format's rules
 
 ERRORS = [
-    (ROBOT + "speed = 1\n" + RIDER, "bodies[0].speed: unknown key (expected one of: name, position, rotation_deg, trajectory)"),
+    (ROBOT + "speed = 1\n" + RIDER, "bodies[0].speed: unknown key (expected one of: name, position, rotation_deg, trajectory, drive)"),
     (ROBOT + MOVES, 'bodies[0].name: body "robot" carries nothing (no sensor or object has body = "robot")'),
     (ROBOT + MOVES + RIDER.replace('"robot"', '"robto"'), 'sensors[0].body: unknown body "robto" (bodies: robot)'),
     (ROBOT + MOVES + '[[objects]]\nname = "crate"\nbox = { size = [1, 1, 1] }\nbody = "cart"\n',
@@ -154,11 +154,14 @@ def test_keyframed_smoke_density_steps_where_two_rows_share_a_time() -> None:
 
 def test_a_live_pose_holds_from_its_event_on_and_never_looks_ahead() -> None:
     initial = Pose((1.0, 0.0, 0.0))
-    events = LiveEvents(np.array([2.0, 4.0]), np.array([[2.0, 0, 0], [3.0, 0, 0]]), euler_quaternion(np.array([[0, 0, 90.0], [0, 0, 0.0]])))
+    times = np.array([2.0, 4.0])
+    events = LiveEvents(times, np.array([[2.0, 0, 0], [3.0, 0, 0]]), euler_quaternion(np.array([[0, 0, 90.0], [0, 0, 0.0]])),
+                        np.zeros((2, 3)), times)
     frames = live_frames(events, initial, np.array([0.0, 2.0, 3.9, 4.0, 100.0]))
     np.testing.assert_allclose(frames.positions[:, 0], [1, 2, 2, 3, 3])
     assert yaws(frames) == pytest.approx([0, 90, 90, 0, 0], abs=1e-9)
-    truncated = live_frames(LiveEvents(events.times[:1], events.positions[:1], events.quaternions[:1]), initial, np.array([3.9]))
+    first = LiveEvents(events.times[:1], events.positions[:1], events.quaternions[:1], events.twists[:1], events.until[:1])
+    truncated = live_frames(first, initial, np.array([3.9]))
     np.testing.assert_array_equal(truncated.positions, frames.positions[2:3])  # a later event never changes an earlier instant
 
 

@@ -1,0 +1,381 @@
+"""A robot driven by velocity: `PUT /api/bodies/NAME/twist` on the bundled `rescue-live`.
+
+The control API runs in this process on an injected `ManualClock` (no
+sleeping on wall time): a scripted velocity profile is sent command by
+command at simulated instants, and the robot's pose (the API's state, the
+scan's sensor pose) is compared with an independent integration of the same
+commands (small Runge-Kutta steps, not the daemon's closed-form arc). The
+robot stops where its footprint touches a wall or a barrel, never inside;
+its watchdog stops it when the commands stop; refused twists get a 4xx
+naming the limit; the event log replayed gives the same poses bit for bit,
+and the WebSocket streams the pose while the robot moves.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+from pathlib import Path
+
+import aiohttp
+import numpy as np
+import pytest
+
+from emulator.control.events import EventWriter, read_events, world_events
+from emulator.control.server import ControlAddress, ControlServer
+from emulator.control.session import LiveSession
+from emulator.daemon.clock import ManualClock
+from emulator.daemon.service import Daemon
+from emulator.errors import SceneError
+from emulator.optics.world import World
+from emulator.scene import load_scene
+from emulator.scene.drive import Twist, planar_motion
+from emulator.scene.bodies import euler_quaternion
+from emulator.scene.live import LiveState, TwistChange, event_from_record, event_record
+from emulator.sensors import create_sensor
+from emulator.sensors.scan_json import scan_json
+
+SCENE = "rescue-live"
+RADIUS = 0.3  # rescue-live's robot footprint
+WATCHDOG_S = 0.5
+
+
+# --------------------------------------------------------------------------- the independent integration
+
+
+def integrate(start: tuple[float, float, float], commands: list[tuple[float, float, float, float]], end_s: float,
+              watchdog_s: float = WATCHDOG_S, step_s: float = 1e-4) -> callable:
+    """Pose (x, y, yaw) as a function of t: each command (t, vx, vy, wz) holds until the next one or its
+    watchdog, integrated with classical RK4 in steps of `step_s` (the daemon uses the closed form)."""
+    times = [commands[0][0]]
+    states = [np.array(start, dtype=float)]
+
+    def velocity(state: np.ndarray, vx: float, vy: float, wz: float) -> np.ndarray:
+        c, s = math.cos(state[2]), math.sin(state[2])
+        return np.array([c * vx - s * vy, s * vx + c * vy, wz])
+
+    for index, (t0, vx, vy, wz) in enumerate(commands):
+        following = commands[index + 1][0] if index + 1 < len(commands) else end_s
+        moving_until = min(following, t0 + watchdog_s)
+        state, t = states[-1].copy(), t0
+        while t < moving_until - 1e-12:
+            h = min(step_s, moving_until - t)
+            k1 = velocity(state, vx, vy, wz)
+            k2 = velocity(state + 0.5 * h * k1, vx, vy, wz)
+            k3 = velocity(state + 0.5 * h * k2, vx, vy, wz)
+            k4 = velocity(state + h * k3, vx, vy, wz)
+            state = state + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            t += h
+            times.append(t)
+            states.append(state.copy())
+        if following > moving_until:  # stopped by the watchdog until the next command
+            times.append(following)
+            states.append(state.copy())
+    times_a, states_a = np.array(times), np.array(states)
+
+    def pose_at(t: float) -> np.ndarray:
+        index = int(np.searchsorted(times_a, t, side="right")) - 1
+        if index < 0:
+            return states_a[0]  # before the first command: where it started
+        if index + 1 >= len(times_a) or times_a[index] == t:
+            return states_a[index]
+        fraction = (t - times_a[index]) / (times_a[index + 1] - times_a[index])
+        return states_a[index] + fraction * (states_a[index + 1] - states_a[index])  # within one 0.1 ms step
+
+    return pose_at
+
+
+def yaw_of(pose: dict) -> float:
+    return math.radians(pose["rotation_deg"][2])
+
+
+def assert_close_to(pose: dict, expected: np.ndarray, where: str) -> None:
+    error_m = math.hypot(pose["position"][0] - expected[0], pose["position"][1] - expected[1])
+    error_deg = abs(math.degrees(math.remainder(yaw_of(pose) - expected[2], 2 * math.pi)))
+    assert error_m < 0.01 and error_deg < 0.5, f"{where}: {error_m * 1000:.3f} mm, {error_deg:.4f} deg off"
+
+
+# --------------------------------------------------------------------------- the API in this process
+
+
+class Api:
+    """The control API of a daemon on `rescue-live` with a ManualClock, over real HTTP and WebSocket."""
+
+    def __init__(self, log: Path | None = None) -> None:
+        self.scene = load_scene(SCENE)
+        self.clock = ManualClock()
+        self.daemon = Daemon(self.scene, clock=self.clock, workers=0)
+        self.session = LiveSession(self.daemon, EventWriter(log) if log is not None else None)
+        self.server = ControlServer(self.session, ControlAddress("127.0.0.1", 0))
+        self.http: aiohttp.ClientSession | None = None
+        self.url = ""
+
+    async def __aenter__(self) -> Api:
+        address = await self.server.start()
+        self.url = address.url
+        self.http = aiohttp.ClientSession()
+        return self
+
+    async def __aexit__(self, *exc_info) -> None:
+        await self.http.close()
+        await self.server.close()
+        self.session.close()
+        self.daemon.close()
+
+    async def call(self, method: str, path: str, body=None) -> tuple[int, dict]:
+        async with self.http.request(method, self.url + path, data=json.dumps(body) if body is not None else None) as answer:
+            return answer.status, await answer.json()
+
+    async def twist(self, at_s: float, vx: float = 0.0, vy: float = 0.0, wz: float = 0.0, name: str = "robot") -> tuple[int, dict]:
+        self.clock._now = at_s - 0.5e-6  # the change takes the next µs tick: exactly at_s
+        return await self.call("PUT", f"/api/bodies/{name}/twist", {"vx": vx, "vy": vy, "wz": wz})
+
+    async def pose(self, at_s: float, x: float, y: float, yaw_deg: float) -> None:
+        self.clock._now = at_s - 0.5e-6
+        status, answer = await self.call("PUT", "/api/bodies/robot/pose", {"position": [x, y, 0.0], "yaw_deg": yaw_deg})
+        assert status == 200, answer
+
+    async def robot(self, at_s: float) -> dict:
+        self.clock._now = at_s
+        status, state = await self.call("GET", "/api/state")
+        assert status == 200
+        return state["bodies"]["robot"]
+
+
+def run(coroutine) -> object:
+    return asyncio.run(coroutine)
+
+
+# --------------------------------------------------------------------------- the tests
+
+
+def test_the_closed_form_arc_matches_a_fine_integration() -> None:
+    twists = np.array([[0.7, 0.0, 0.0], [0.5, 0.2, 1.3], [0.0, 0.0, -2.0], [0.4, -0.3, 1e-9], [1.0, 0.0, 0.05]])
+    start = np.array([[1.0, 2.0, 0.0]] * len(twists))
+    yaw0 = 0.3
+    quaternions = euler_quaternion(np.array([[0.0, 0.0, math.degrees(yaw0)]] * len(twists)))
+    for duration in (0.0, 0.01, 0.5, 3.0):
+        positions, turned = planar_motion(start, quaternions, twists, np.full(len(twists), duration))
+        for row, (vx, vy, wz) in enumerate(twists):
+            expected = integrate((1.0, 2.0, yaw0), [(0.0, vx, vy, wz)], duration, watchdog_s=duration, step_s=1e-3)(duration)
+            np.testing.assert_allclose(positions[row, :2], expected[:2], atol=1e-9)
+            yaw = math.atan2(2 * (turned[row, 3] * turned[row, 2]), 1 - 2 * turned[row, 2] ** 2)
+            assert math.remainder(yaw - expected[2], 2 * math.pi) == pytest.approx(0.0, abs=1e-9)
+    same, _ = planar_motion(start, quaternions, twists, np.zeros(len(twists)))
+    np.testing.assert_array_equal(same, start)  # no time, no motion: the pose's own bits
+
+
+def profile() -> list[tuple[float, float, float, float]]:
+    """Commands every 0.1 s for 5 s, with a 1 s gap (the watchdog stops the robot at 3.0 s + 0.5 s)."""
+    commands = []
+    for k in range(50):
+        t = 1.0 + 0.1 * k
+        if 3.0 < t < 4.0:
+            continue
+        commands.append((round(t, 6), 0.4 + 0.1 * math.sin(2 * t), 0.05 * math.cos(t), 0.3 * math.cos(1.2 * t)))
+    return commands
+
+
+def test_a_scripted_velocity_profile_is_followed_within_1_cm_and_half_a_degree(tmp_path: Path) -> None:
+    commands = profile()
+    expected = integrate((5.0, 1.75, 0.0), commands, 8.0)
+    checks = np.round(np.arange(0.5, 8.0, 0.037), 6)
+
+    async def drive() -> tuple[list[dict], list[dict]]:
+        poses, scans = [], []
+        async with Api(tmp_path / "events.jsonl") as api:
+            urg = create_sensor(api.scene, "urg", api.daemon.world)
+            pending = list(commands)
+            for t in checks:
+                while pending and pending[0][0] <= t:
+                    at, vx, vy, wz = pending.pop(0)
+                    status, answer = await api.twist(at, vx, vy, wz)
+                    assert status == 200, answer
+                poses.append(await api.robot(float(t)))
+                scans.append(scan_json(urg.scan(float(t)), urg))
+        return poses, scans
+
+    poses, scans = run(drive())
+    for t, pose, scan in zip(checks, poses, scans):
+        assert_close_to(pose, expected(t), f"state at {t} s")
+        x, y, yaw = expected(t)
+        mount = np.array([x + 0.15 * math.cos(yaw), y + 0.15 * math.sin(yaw), 0.35])  # urg at (0.15, 0, 0.35)
+        np.testing.assert_allclose(scan["pose"]["position"], mount, atol=0.01, err_msg=f"scan at {t} s")
+    moved = math.dist(poses[0]["position"], poses[-1]["position"])
+    assert moved > 1.5, moved
+    # the watchdog: no command between 3.0 and 4.0 s, so the robot stands still from 3.5 s on
+    standing = [pose["position"] for t, pose in zip(checks, poses) if 3.5 <= t < 4.0]
+    assert len(standing) > 5 and all(position == standing[0] for position in standing)
+    assert all(pose["twist"] == {"vx": 0.0, "vy": 0.0, "wz": 0.0} for t, pose in zip(checks, poses) if 3.5 <= t < 4.0)
+
+
+def test_the_watchdog_stops_the_robot_after_the_last_command() -> None:
+    async def drive() -> list[dict]:
+        async with Api() as api:
+            assert (await api.twist(2.0, vx=0.6, wz=0.4))[0] == 200
+            return [await api.robot(t) for t in (2.25, 2.5, 2.6, 10.0)]
+
+    quarter, at_watchdog, after, much_later = run(drive())
+    assert quarter["twist"] == {"vx": 0.6, "vy": 0.0, "wz": 0.4}
+    assert at_watchdog["twist"] == after["twist"] == {"vx": 0.0, "vy": 0.0, "wz": 0.0}
+    assert at_watchdog["position"] == after["position"] == much_later["position"]
+    expected = integrate((5.0, 1.75, 0.0), [(2.0, 0.6, 0.0, 0.4)], 10.0)
+    assert_close_to(at_watchdog, expected(2.5), "at the watchdog")
+    arc = 0.6 * WATCHDOG_S  # the path's length
+    chord = 2 * 0.6 / 0.4 * math.sin(0.4 * WATCHDOG_S / 2)
+    assert math.dist(at_watchdog["position"][:2], (5.0, 1.75)) == pytest.approx(chord, abs=1e-9) and chord < arc
+
+
+def test_a_wall_and_a_barrel_stop_the_robot_at_contact_not_inside() -> None:
+    async def drive() -> dict:
+        async with Api() as api:
+            await api.pose(1.0, 5.0, 1.75, -90.0)  # facing south: the south wall's inner face is y = 0
+            for k in range(30):
+                assert (await api.twist(1.1 + 0.1 * k, vx=0.8))[0] == 200
+            at_wall = await api.robot(5.0)
+            still_pushing = await api.robot(3.5)
+            await api.twist(5.0, vx=-0.5)  # backing off is not blocked
+            backed = await api.robot(5.5)
+            await api.pose(6.0, 5.0, 0.6, 0.0)  # facing east, at a barrel of radius 0.3 centred at (6.0, 0.6)
+            for k in range(10):
+                await api.twist(6.1 + 0.1 * k, vx=0.7, vy=0.0)
+            at_barrel = await api.robot(8.0)
+            await api.pose(9.0, 5.0, 0.32, 0.0)  # 2 cm from the wall: sliding along it is not blocked
+            await api.twist(9.1, vx=0.5)
+            along = await api.robot(9.6)
+            return {"wall": at_wall, "pushing": still_pushing, "backed": backed, "barrel": at_barrel, "along": along}
+
+    poses = run(drive())
+    x, y, _ = poses["wall"]["position"]
+    assert x == pytest.approx(5.0, abs=1e-12)
+    assert RADIUS - 1e-9 <= y <= RADIUS + 1e-6  # touching the wall (y = 0) with its 0.3 m radius: not inside
+    assert poses["pushing"]["position"] == poses["wall"]["position"]  # reached before 3.5 s, pushing since
+    assert poses["backed"]["position"][1] == pytest.approx(y + 0.25, abs=1e-9)
+    bx, by, _ = poses["barrel"]["position"]
+    # the barrel's mesh has a vertex at (5.7, 0.6) facing the robot: contact 0.3 m before it
+    assert 5.4 - 1e-6 <= bx <= 5.4 + 1e-9 and by == pytest.approx(0.6, abs=1e-12)
+    assert poses["along"]["position"][:2] == pytest.approx([5.25, 0.32], abs=1e-9)
+
+
+def test_refused_twists_get_a_4xx_naming_the_limit() -> None:
+    async def refusals() -> list[tuple[int, dict]]:
+        async with Api() as api:
+            put = lambda body, name="robot": api.call("PUT", f"/api/bodies/{name}/twist", body)  # noqa: E731
+            return [
+                await put({"vx": 1.2}),
+                await put({"vx": 0.8, "vy": 0.8}),
+                await put({"wz": -2.5}),
+                await put({"vx": "fast"}),
+                await put({"vx": 0.1, "speed": 1}),
+                await put({}),
+                await put({"vx": 0.1}, name="east_door"),
+                await put({"vx": 0.1}, name="nobody"),
+                await api.call("POST", "/api/bodies/robot/twist", {"vx": 0.1}),
+                await api.call("PUT", "/api/bodies/robot/twist", [0.1, 0, 0]),
+            ]
+
+    answers = run(refusals())
+    statuses = [status for status, _ in answers]
+    assert statuses == [400, 400, 400, 400, 400, 400, 409, 404, 405, 400]
+    over, diagonal, turning, text, unknown, empty, not_live, unknown_body, _, not_object = [a for _, a in answers]
+    assert over == {"error": "bodies[robot].twist: speed 1.2 m/s is over the body's limit "
+                             "bodies[robot].drive.max_speed = 1 m/s", "key": "bodies[robot].drive.max_speed"}
+    assert "speed 1.13137 m/s" in diagonal["error"]
+    assert turning["key"] == "bodies[robot].drive.max_turn_rate" and "-2.5 rad/s" in turning["error"]
+    assert text["key"] == "bodies[robot].twist.vx" and "expected a number" in text["error"]
+    assert unknown["key"] == "bodies[robot].twist.speed"
+    assert empty["error"] == "bodies[robot].twist: expected at least one of: vx, vy, wz"
+    assert "not driven from outside" in not_live["error"]
+    assert "no body named" in unknown_body["error"]
+    assert not_object["error"].startswith("bodies[robot].twist: expected a table")
+
+
+def test_the_event_log_replayed_gives_the_same_poses_bit_for_bit(tmp_path: Path) -> None:
+    log = tmp_path / "events.jsonl"
+
+    async def drive() -> tuple[LiveState, list]:
+        async with Api(log) as api:
+            await api.pose(0.5, 5.0, 1.75, -90.0)
+            for at, vx, vy, wz in profile():
+                await api.twist(at, vx, vy, wz)  # toward the south wall: it stops there on the way
+            return api.daemon.live, list(api.session.events)
+
+    live, applied = run(drive())
+    lines = [json.loads(line) for line in log.read_text().splitlines()]
+    assert lines[1] == {"t": 1.0, "op": "twist", "name": "robot", "vx": 0.4 + 0.1 * math.sin(2.0),
+                        "vy": 0.05 * math.cos(1.0), "wz": 0.3 * math.cos(1.2)}  # what was sent, nothing derived
+    replayed = World(load_scene(SCENE))
+    for event in world_events(read_events(log, replayed.scene)):
+        replayed.apply(event)
+    times = np.linspace(0.0, 8.0, 4001)
+    live_frames = live.bodies.frames("robot", times)
+    again = replayed.bodies.frames("robot", times)
+    np.testing.assert_array_equal(again.positions, live_frames.positions)
+    np.testing.assert_array_equal(again.rotations, live_frames.rotations)
+    assert live_frames.positions[:, 1].min() == pytest.approx(RADIUS, abs=1e-6)  # it met the wall
+    # a worker process is sent the events as applied (a twist with where it stops): it needs no solids
+    worker = LiveState(load_scene(SCENE))
+    for event in applied:
+        worker.apply(event_from_record(event_record(event)))
+    assert "obstacles" not in worker.__dict__  # the solids were never cut: every twist came resolved
+    np.testing.assert_array_equal(worker.bodies.frames("robot", times).positions, live_frames.positions)
+
+
+def test_the_websocket_streams_the_pose_while_the_robot_moves() -> None:
+    async def watch() -> list[dict]:
+        async with Api() as api:
+            async with api.http.ws_connect(api.url + "/api/ws") as ws:
+                assert json.loads((await ws.receive(timeout=5)).data)["type"] == "state"
+                api.clock._now = 1.0
+                await ws.send_json({"op": "twist", "name": "robot", "vx": 0.5, "wz": 0.0})
+                seen: list[dict] = []
+                while len([m for m in seen if m["type"] == "poses"]) < 3:
+                    message = json.loads((await ws.receive(timeout=5)).data)
+                    assert message["type"] != "error", message
+                    seen.append(message)
+                    api.clock._now += 0.1
+                api.clock._now = 2.0  # past the watchdog: one last message, the robot standing
+                while seen[-1]["type"] != "poses" or any(seen[-1]["bodies"]["robot"]["twist"].values()):
+                    seen.append(json.loads((await ws.receive(timeout=5)).data))
+                return seen
+
+    messages = run(watch())
+    poses = [message for message in messages if message["type"] == "poses"]
+    xs = [message["bodies"]["robot"]["position"][0] for message in poses]
+    assert xs[0] < xs[1] < xs[2], xs
+    for message in poses[:-1]:
+        assert message["bodies"]["robot"]["position"][0] == pytest.approx(5.0 + 0.5 * min(message["time_s"] - 1.000001, 0.5), abs=1e-9)
+    assert poses[-1]["bodies"]["robot"]["position"][0] == pytest.approx(5.25, abs=1e-9)
+
+
+@pytest.mark.parametrize(("drive", "message"), [
+    ("{ radius = 0 }", "bodies[0].drive.radius: must be > 0, got 0"),
+    ("{ max_speed = 11 }", "bodies[0].drive.max_speed: must be <= 10, got 11"),
+    ("{ watchdog = 6 }", "bodies[0].drive.watchdog: must be <= 5, got 6"),
+    ("{ height = 0.01 }", "bodies[0].drive.height: must be > 0.02, got 0.01"),
+    ("{ wheels = 4 }", "bodies[0].drive.wheels: unknown key (expected one of: radius, height, clearance, max_speed, "
+                       "max_turn_rate, watchdog)"),
+])
+def test_a_broken_drive_table_is_one_line_naming_the_key(tmp_path: Path, drive: str, message: str) -> None:
+    path = tmp_path / "driven.toml"
+    path.write_text(f'[[bodies]]\nname = "robot"\ntrajectory = "live"\ndrive = {drive}\n\n'
+                    '[[sensors]]\nname = "urg"\nmodel = "urg-04lx"\nbody = "robot"\n')
+    with pytest.raises(SceneError) as error:
+        load_scene(path)
+    assert str(error.value) == f"driven.toml: {message}"
+
+
+def test_only_a_live_body_has_a_drive(tmp_path: Path) -> None:
+    path = tmp_path / "still.toml"
+    path.write_text('[[bodies]]\nname = "robot"\ndrive = { radius = 0.2 }\n\n'
+                    '[[sensors]]\nname = "urg"\nmodel = "urg-04lx"\nbody = "robot"\n')
+    with pytest.raises(SceneError, match=r'still.toml: bodies\[0\].drive: only a body with trajectory = "live"'):
+        load_scene(path)
+
+
+def test_a_twist_stamped_before_the_last_event_is_refused() -> None:
+    live = LiveState(load_scene(SCENE))
+    live.apply(TwistChange(2.0, "robot", Twist(0.5)))
+    with pytest.raises(ValueError, match="earlier than the body's last event"):
+        live.apply(TwistChange(1.0, "robot", Twist(0.5)))
