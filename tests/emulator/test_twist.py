@@ -16,12 +16,18 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import subprocess
+import time
 from pathlib import Path
 
 import aiohttp
 import numpy as np
 import pytest
+from control_support import call
+from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 
+from emulator.bench.serve_process import ServeProcess, serve_command
 from emulator.control.events import EventWriter, read_events, world_events
 from emulator.control.server import ControlAddress, ControlServer
 from emulator.control.session import LiveSession
@@ -379,3 +385,60 @@ def test_a_twist_stamped_before_the_last_event_is_refused() -> None:
     live.apply(TwistChange(2.0, "robot", Twist(0.5)))
     with pytest.raises(ValueError, match="earlier than the body's last event"):
         live.apply(TwistChange(1.0, "robot", Twist(0.5)))
+
+
+# --------------------------------------------------------------------------- the real daemon, as a user drives it
+
+
+def test_the_readme_examples_drive_rescue_lives_robot_and_the_session_replays(tmp_path: Path) -> None:
+    """`ctl pose robot 1.0 2.0 --yaw 90` and `ctl twist robot 0.3 -0.5 --for 1` on `serve rescue-live`
+    (scans in worker processes, which get each twist resolved); the pose follows the logged commands;
+    Foxglove's /tf (recorded with --mcap) carries it; `scan --events-in` replays the session's last scan."""
+    log, recording = tmp_path / "session.jsonl", tmp_path / "session.mcap"
+    with ServeProcess(SCENE, ["urg=tcp:127.0.0.1:0", f"lms=pty:{tmp_path / 'lms'}"],
+                      extra_args=("--events", str(log), "--mcap", str(recording))) as daemon:
+        def ctl(*args: str) -> subprocess.CompletedProcess:
+            return subprocess.run([*serve_command(), "ctl", "--url", daemon.control_url, *args],
+                                  capture_output=True, text=True, timeout=60)
+
+        posed = ctl("pose", "robot", "1.0", "2.0", "--yaw", "90")
+        assert posed.returncode == 0 and posed.stdout.startswith('applied {"t": '), posed.stderr
+        driven = ctl("twist", "robot", "0.3", "-0.5", "--for", "1")
+        assert driven.returncode == 0, driven.stderr
+        assert '"op": "twist", "name": "robot", "vx": 0.3, "vy": 0.0, "wz": -0.5' in driven.stdout
+        refused = ctl("twist", "robot", "1.5", "0")
+        assert refused.returncode == 2 and refused.stderr == (
+            "lrf-emulator ctl: 400: bodies[robot].twist: speed 1.5 m/s is over the body's limit "
+            "bodies[robot].drive.max_speed = 1 m/s\n")
+        deadline = time.monotonic() + 10  # the real clock: wait out the watchdog
+        while any((state := json.loads(ctl("state").stdout))["bodies"]["robot"]["twist"].values()):
+            assert time.monotonic() < deadline
+            time.sleep(0.1)
+        time.sleep(0.3)  # a scan measured after the robot stopped
+        status, scan = call(daemon.control_url, "GET", "/api/sensors/urg/scan")
+        assert status == 200 and scan["time_s"] > state["time_s"]
+    events = [json.loads(line) for line in log.read_text().splitlines()]
+    assert events[0]["op"] == "pose" and len(events) >= 15 and {event["op"] for event in events[1:]} == {"twist"}
+    commands = [(event["t"], event["vx"], event["vy"], event["wz"]) for event in events[1:]]
+    expected = integrate((1.0, 2.0, math.pi / 2), commands, scan["time_s"])(scan["time_s"])
+    robot = state["bodies"]["robot"]
+    assert_close_to(robot, expected, "after the drive")
+    assert math.dist(robot["position"][:2], (1.0, 2.0)) > 0.3  # it drove, to the right of north
+    assert robot["position"][0] > 1.1 and robot["rotation_deg"][2] < 90.0
+    with recording.open("rb") as file:
+        transforms = [
+            transform for _, _, _, decoded in make_reader(file, decoder_factories=[ProtobufDecoderFactory()])
+            .iter_decoded_messages(topics=["/tf"]) for transform in decoded.transforms if transform.child_frame_id == "robot"
+        ]
+    xs = [transform.translation.x for transform in transforms]
+    assert xs[-1] == pytest.approx(robot["position"][0], abs=1e-9) and len(set(xs)) >= 5, xs  # /tf followed it
+    replayed = subprocess.run(
+        [*serve_command(), "scan", SCENE, "--sensor", "urg", "--time", repr(scan["time_s"]), "--events-in", str(log)],
+        capture_output=True, text=True, timeout=120,
+    )
+    assert replayed.returncode == 0, replayed.stderr
+    again = json.loads(replayed.stdout)
+    assert again["values"] == scan["values"]  # the workers' scan, replayed in one process: beam for beam
+    yaw = math.radians(robot["rotation_deg"][2])
+    urg_at = [robot["position"][0] + 0.15 * math.cos(yaw), robot["position"][1] + 0.15 * math.sin(yaw), 0.35]
+    assert again["pose"]["position"] == pytest.approx(urg_at, abs=1e-9)
