@@ -136,11 +136,11 @@ def carmen_to_rawlog(carmen: Path, rawlog: Path) -> Path:
     """`carmen2rawlog` on a CARMEN log, then `rawlog-edit --remove-label ODOMETRY`: a rawlog of its laser
     scans alone (one icp-slam pose per scan; the odometry it writes from the log's robot poses is dropped)."""
     converted = rawlog.with_name(f"{rawlog.stem}_with_odometry.rawlog")
-    result = subprocess.run([program("carmen2rawlog"), "-q", "-i", str(carmen), "-o", str(converted)],
+    result = subprocess.run([program("carmen2rawlog"), "-q", "-w", "-i", str(carmen), "-o", str(converted)],
                             capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
     if result.returncode != 0 or not converted.exists():
         raise MrptError(f"carmen2rawlog failed ({result.returncode}) on {carmen}:\n{result.stdout[-2000:]}{result.stderr[-2000:]}")
-    result = subprocess.run([program("rawlog-edit"), "--remove-label", "ODOMETRY", "-i", str(converted), "-o", str(rawlog)],
+    result = subprocess.run([program("rawlog-edit"), "-w", "--remove-label", "ODOMETRY", "-i", str(converted), "-o", str(rawlog)],
                             capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
     if result.returncode != 0 or not rawlog.exists():
         raise MrptError(f"rawlog-edit --remove-label failed ({result.returncode}):\n{result.stdout[-2000:]}{result.stderr[-2000:]}")

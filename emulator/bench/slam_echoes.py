@@ -137,24 +137,26 @@ def draw_paths(results: list[Run], out: Path, *, preset: str = "physical", smoke
              title=f"rescue, {preset}, smoke x{smoke_scale:g}: icp-slam paths, truth (blue)")
 
 
-HEADER = ("| sensor, echo | scans | invalid beams | ATE RMSE (cm) | ATE max (cm) | heading RMSE (deg) |\n"
-          "|---|---|---|---|---|---|")
+HEADER = ("| smoke scale | sensor, echo | scans | invalid beams | ATE RMSE (cm) | ATE max (cm) | heading RMSE (deg) |\n"
+          "|---|---|---|---|---|---|---|")
 
 
-def table_row(result: Run) -> str:
+def table_row(result: Run, smoke_scale: float) -> str:
     error = result.error
-    return (f"| {result.label} | {len(result.times_s)} | {100 * result.invalid_share:.1f} % | {100 * error.rmse_m:.1f} "
-            f"| {100 * error.max_m:.1f} | {math.degrees(error.heading_rmse_rad):.1f} |")
+    return (f"| {smoke_scale:g} | {result.label} | {len(result.times_s)} | {100 * result.invalid_share:.1f} % "
+            f"| {100 * error.rmse_m:.1f} | {100 * error.max_m:.1f} | {math.degrees(error.heading_rmse_rad):.1f} |")
 
 
 MARKER = "<!-- slam-echo-table -->"
 FIGURE = "slam-rescue-echoes.png"
+SMOKE_SCALES = (0.0, 1.0, 2.0)
+MAPPED_SCALE = 1.0
 
 
 def main(argv: list[str] | None = None) -> int:
-    """`python -m emulator.bench.slam_echoes [FILE.md]`: the three runs on `rescue` (physical, its own
-    smoke); prints the table, draws docs/figures/slam-rescue-echoes.png, and with FILE.md replaces
-    the part between its two `<!-- slam-echo-table -->` markers."""
+    """`python -m emulator.bench.slam_echoes [FILE.md]`: the three runs on `rescue` (physical) at each smoke
+    scale; prints the table, draws docs/figures/slam-rescue-echoes.png (the scene's own smoke), and
+    with FILE.md replaces the part between its two `<!-- slam-echo-table -->` markers."""
     import argparse
     import sys
     import tempfile
@@ -162,13 +164,18 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m emulator.bench.slam_echoes")
     parser.add_argument("report", nargs="?", type=Path, help="markdown file whose table to replace")
     parser.add_argument("--figures", type=Path, default=Path("docs/figures"), help="where the map PNG goes")
-    parser.add_argument("--smoke-scale", type=float, default=1.0)
+    parser.add_argument("--scales", type=float, nargs="+", default=list(SMOKE_SCALES))
     args = parser.parse_args(argv)
+    rows = []
     with tempfile.TemporaryDirectory(prefix="slam-echoes-") as work:
-        results = runs(Path(work), smoke_scale=args.smoke_scale)
-    args.figures.mkdir(parents=True, exist_ok=True)
-    draw_paths(results, args.figures / FIGURE, smoke_scale=args.smoke_scale)
-    table = "\n".join([HEADER, *(table_row(r) for r in results)])
+        for scale in args.scales:
+            results = runs(Path(work) / f"{scale:g}", smoke_scale=scale)
+            rows += [table_row(r, scale) for r in results]
+            print("\n".join(rows[-len(results):]), file=sys.stderr, flush=True)
+            if scale == MAPPED_SCALE:
+                args.figures.mkdir(parents=True, exist_ok=True)
+                draw_paths(results, args.figures / FIGURE, smoke_scale=scale)
+    table = "\n".join([HEADER, *rows])
     print(table)
     if args.report is not None:
         before, _, after = args.report.read_text().split(MARKER, 2)
