@@ -27,6 +27,8 @@ object and `lines` are printed in the table. Add a section by adding it to `SECT
   the URG with GDs and another writes 64 KiB/s of junk (`fairness`).
 - cola: CoLa-B streams through a served daemon (`cola_streams`): an LMS511 at
   0.1667° under `physical`, and 4 TiM571 + 2 LMS111 at 50 Hz from one daemon.
+- slam: `rescue`'s loop in its smoke, mapped by MRPT's icp-slam from the URG-04LX and from a
+  UTM-30LX-EW on the same mount with its first and then its last echo (`slam_echoes`): ATE of each.
 - memory: peak resident set size of this process (last, so it covers the others).
 """
 
@@ -252,6 +254,21 @@ def cola_section(quick: bool) -> Section:
     return bench_section(quick)
 
 
+def slam_section(quick: bool) -> Section:
+    import tempfile
+    from pathlib import Path
+
+    from emulator.bench.slam_echoes import LOOP_END_S, runs  # runs MRPT's tools: imported only when run
+
+    with tempfile.TemporaryDirectory(prefix="bench-slam-") as work:
+        results = runs(Path(work), end_s=25.0 if quick else LOOP_END_S)
+    data = [{"sensor": r.label, "scans": len(r.times_s), "invalid_share": r.invalid_share, "ate_rmse_m": r.error.rmse_m,
+             "ate_max_m": r.error.max_m, "heading_rmse_deg": float(np.degrees(r.error.heading_rmse_rad))} for r in results]
+    lines = [f"slam rescue physical: {r.label}: ATE {100 * r.error.rmse_m:.1f} cm RMS ({100 * r.error.max_m:.1f} max), "
+             f"heading {np.degrees(r.error.heading_rmse_rad):.1f} deg, {100 * r.invalid_share:.1f} % beams invalid" for r in results]
+    return {"slam": data}, lines
+
+
 def memory_section(quick: bool) -> Section:
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
     return {"peak_rss_mb": peak_mb}, [f"memory: peak RSS {peak_mb:.1f} MB (this process)"]
@@ -267,5 +284,6 @@ SECTIONS: dict[str, Callable[[bool], Section]] = {
     "fairness": fairness_section,
     "view": view_section,
     "cola": cola_section,
+    "slam": slam_section,
     "memory": memory_section,
 }

@@ -134,7 +134,8 @@ def draw_paths(results: list[Run], out: Path, *, preset: str = "physical", smoke
     draw_map(scene, float(results[0].times_s[-1]), out,
              extra_paths=tuple((r.error.aligned[:, :2], PATH_COLOURS[r.label], f"{r.label}: ATE {100 * r.error.rmse_m:.0f} cm")
                                for r in results),
-             title=f"rescue, {preset}, smoke x{smoke_scale:g}: icp-slam paths, truth (blue)")
+             title=f"rescue, {preset}, smoke x{smoke_scale:g}: icp-slam paths of the URG-04LX (black), the UTM-30LX-EW's "
+                   f"first echo (orange) and last echo (green); truth (blue)")
 
 
 HEADER = ("| smoke scale | sensor, echo | scans | invalid beams | ATE RMSE (cm) | ATE max (cm) | heading RMSE (deg) |\n"

@@ -72,6 +72,9 @@ def test_bench_json_reports_every_bundled_sensor_and_every_section():
     assert [(row["case"], row["client"]) for row in report["cola"]] == [("lms511-fine", "lms511")] + [
         ("six-units", name) for name in ("tim0", "tim1", "tim2", "tim3", "lms0", "lms1")]
     assert all(row["telegrams"] > 0 and row["jitter_p99_ms"] >= 0 for row in report["cola"])
+    # SLAM in smoke: the URG-04LX and a UTM-30LX-EW's first and last echo through icp-slam
+    assert [row["sensor"] for row in report["slam"]] == ["URG-04LX", "UTM-30LX-EW first echo", "UTM-30LX-EW last echo"]
+    assert all(row["scans"] > 100 and 0 < row["ate_rmse_m"] <= row["ate_max_m"] for row in report["slam"])
 
 
 def test_bench_table_shows_only_the_chosen_sections():
