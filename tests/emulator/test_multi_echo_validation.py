@@ -69,3 +69,10 @@ def test_puffs_crossing_the_beams_give_the_first_echo_on_a_puff_and_the_last_on_
     crossing = plume_crossing(times_s=np.arange(4.0, 10.0, 0.5))
     assert crossing.beams_in_smoke > 200
     assert crossing.puff_then_wall > 0.9
+
+
+def test_the_lms511_fog_filter_hides_part_of_the_puffs_and_keeps_the_wall_behind_them():
+    lms, times = PULSED_RECEIVERS["lms511"], np.arange(4.0, 10.0, 0.5)
+    off, on = plume_crossing(lms, times, fog_filter=False), plume_crossing(lms, times, fog_filter=True)
+    assert 0 < on.beams_in_smoke < off.beams_in_smoke
+    assert on.puff_then_wall > 0.9 and off.puff_then_wall > 0.9
