@@ -138,3 +138,15 @@ def test_ctl_watch_counts_no_beam_it_never_measured() -> None:
 
 def test_every_model_a_scene_may_hold_has_a_publication() -> None:
     assert set(SENSOR_MODELS) <= set(PUBLICATIONS)
+
+
+def test_the_view_draws_no_beam_the_urg_never_measured() -> None:
+    """The browser view's points and error marks come from the measured steps only (steps 0..43 and
+    726..768 carry 0, which would otherwise be drawn as 'nothing within reach' all round the back)."""
+    from emulator.scene.model import Pose
+    from emulator.view.browser import scan_points
+
+    angles = urg04lx.step_angles_rad()
+    values = np.where((np.arange(769) >= 44) & (np.arange(769) <= 725), 1, 2000)  # measured: error 1; never measured: 2 m
+    hits, _, marks = scan_points(Scan("urg", urg04lx.MODEL, 1.0, angles, values, "mm"), Pose())
+    assert len(hits) == 0 and len(marks) == 682
