@@ -50,9 +50,10 @@ class _Parser(argparse.ArgumentParser):
 
 
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
-    """The parser; only the subcommand named in `argv` has its module imported and its options
-    added (`ctl` and `--version` start without loading the simulation or the server)."""
-    chosen = _subcommand_in(sys.argv[1:] if argv is None else argv)
+    """The parser for `argv`: only the subcommand it names has its module imported and its options
+    added (`ctl` and `--version` start without loading the simulation or the server); every
+    subcommand's without `argv`."""
+    chosen = None if argv is None else _subcommand_in(argv)
     parser = _Parser(prog="lrf-emulator", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action=_VersionAction, help="show the version and exit")
     parser.add_argument("--debug", action="store_true", help="show tracebacks for errors")
@@ -60,7 +61,7 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     sub.required = True
     for name, (module_name, help_text) in SUBCOMMANDS.items():
         command_parser = sub.add_parser(name, help=help_text, description=help_text)
-        if name != chosen:
+        if argv is not None and name != chosen:
             continue
         module = importlib.import_module(f"emulator.commands.{module_name}")
         # after the subcommand too; SUPPRESS keeps a --debug given before it
@@ -94,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         # Modules load while stop signals are only held: trimesh catches BaseException
         # around its imports and would turn an interrupt there into a later TypeError.
-        parser = build_parser(argv)
+        parser = build_parser(sys.argv[1:] if argv is None else argv)
         raise_on_stop_signals()
         args = parser.parse_args(argv)
         return int(args._run(args) or 0)
