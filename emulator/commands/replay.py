@@ -25,15 +25,19 @@ from emulator.recording.replay_sources import (
     LMS_MODEL,
     MODELS,
     URG_MODEL,
+    ColaReplay,
     replay_sensor,
 )
+from emulator.scene.sick_models import MODELS as SICK_MODELS
 from emulator.recording.textlog import Log, read_log
 from emulator.scene.model import Pose, Scene, SensorSpec
 
 MCAP_MAGIC = b"\x89MCAP"
 ROS1_BAG_MAGIC = b"#ROSBAG V2.0"
-DEFAULT_ENDPOINTS = {**{model: "tcp:127.0.0.1:10940" for model in MODELS if model != LMS_MODEL}, LMS_MODEL: "pty:ttyLMS0"}
-DEFAULT_NAMES = {URG_MODEL: "urg", "utm-30lx": "utm", "utm-30lx-ew": "utm", "ust-10lx": "ust", "ust-20lx": "ust", LMS_MODEL: "lms"}
+DEFAULT_ENDPOINTS = {**{model: "tcp:127.0.0.1:10940" for model in MODELS if model != LMS_MODEL}, LMS_MODEL: "pty:ttyLMS0",
+                     **{model: "tcp:127.0.0.1:2111" for model in SICK_MODELS}}
+DEFAULT_NAMES = {URG_MODEL: "urg", "utm-30lx": "utm", "utm-30lx-ew": "utm", "ust-10lx": "ust", "ust-20lx": "ust", LMS_MODEL: "lms",
+                 **{model: "sick" for model in SICK_MODELS}}
 LMS_WINDOWS = {(180, 1.0), (180, 0.5), (100, 1.0), (100, 0.5), (100, 0.25)}
 
 
@@ -45,7 +49,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--device", dest="model", required=True, choices=MODELS, help="the device to serve the log as")
     parser.add_argument(
         "--endpoint", action="append", default=[], metavar="URI",
-        help="pty:PATH or tcp:HOST:PORT (repeatable; default: a Hokuyo tcp:127.0.0.1:10940, lms200 pty:ttyLMS0)",
+        help="pty:PATH or tcp:HOST:PORT (repeatable; default: a Hokuyo tcp:127.0.0.1:10940, lms200 pty:ttyLMS0,"
+             " a CoLa SICK tcp:127.0.0.1:2111)",
     )
 
 
@@ -64,6 +69,8 @@ def replay_scene(log: Log, model: str, endpoints: list[str]) -> Scene:
     """The scene for a text log: its sensor, named from the header, in the log's LMS200 window."""
     name = log.header.sensor or DEFAULT_NAMES[model]
     options = lms_options(log) if model == LMS_MODEL else {}
+    if model in SICK_MODELS:  # the unit powers on in the scan configuration the log was recorded in
+        options = ColaReplay(log, name, SICK_MODELS[model]).scan_configuration()
     return sensor_only_scene(SensorSpec(name, model, Pose(), tuple(endpoints or [DEFAULT_ENDPOINTS[model]]), options))
 
 

@@ -25,13 +25,17 @@ from emulator.sensors.lms200 import PERIOD_S as LMS_REVOLUTION_S
 from emulator.sensors.lms200 import REVOLUTIONS_PER_SCAN, configured_window
 from emulator.sensors.scan import Scan
 from emulator.sensors.scan_json import scan_json
-from emulator.sensors import hokuyo_model
+from emulator.scene.sick_models import MODELS as SICK_MODELS
+from emulator.sensors import hokuyo_model, sick_cola
 
 Subscriber = Callable[[str], None]  # gets each scan message, serialized
 
 
 def configured_request(spec: SensorSpec) -> dict[str, Any]:
-    """The scan keywords of the scan the scene's options select (none for the URG-04LX)."""
+    """The scan keywords of the scan the scene's options select (none for a Hokuyo): the LMS200's window,
+    a CoLa SICK's scan configuration (the request its device makes at power-on)."""
+    if spec.model in SICK_MODELS:
+        return sick_cola.configured_request(spec.options)
     return configured_window(spec.options) if spec.model == "lms200" else {}
 
 
@@ -41,6 +45,8 @@ def configured_period_s(spec: SensorSpec) -> float:
     hokuyo = hokuyo_model(spec.model)
     if hokuyo is not None:
         return hokuyo.period_s
+    if spec.model in SICK_MODELS:  # one turn at the configured scan frequency
+        return 1.0 / float(spec.options["scan_frequency_hz"])
     return REVOLUTIONS_PER_SCAN[configured_window(spec.options)["step_deg"]] * LMS_REVOLUTION_S
 
 

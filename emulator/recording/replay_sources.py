@@ -18,12 +18,14 @@ import numpy as np
 
 from emulator.errors import UserError
 from emulator.recording.textlog import Log
+from emulator.scene.sick_models import ANGLE_TICKS_PER_DEG, FREQUENCY_TICKS_PER_HZ, SickModel
+from emulator.scene.sick_models import MODELS as SICK_MODELS
 from emulator.sensors.hokuyo_models import HOKUYO_MODELS, URG_04LX, HokuyoModel
 from emulator.sensors.scan import Scan
 
 URG_MODEL = "urg-04lx"
 LMS_MODEL = "lms200"
-MODELS = (*HOKUYO_MODELS, LMS_MODEL)
+MODELS = (*HOKUYO_MODELS, LMS_MODEL, *SICK_MODELS)
 
 URG_STEPS = 769
 URG_FRONT_STEP = 384
@@ -130,6 +132,54 @@ class LmsReplay:
         ]
 
 
+class ColaReplay:
+    """A CoLa SICK serving a log's scans (first-echo distance counts, 0 = no echo) as its one echo.
+
+    The log's angles are the unit's own grid at the recorded resolution; a client that asks for another
+    scan configuration gets, per beam of its grid, the recorded beam at that angle (none within
+    ANGLE_TOLERANCE_RAD: no echo).
+    """
+
+    def __init__(self, log: Log, name: str, model: SickModel) -> None:
+        _check_model(log, model.name)
+        self.name, self.model, self._sick = name, model.name, model
+        self._angles = log.angles_rad[0]
+        if np.any(np.abs(log.angles_rad - self._angles) > ANGLE_TOLERANCE_RAD):
+            raise UserError(f"a {model.name} log must use the same angles on every line")
+        if len(self._angles) < 2 or np.any(np.diff(self._angles) <= 0):
+            raise UserError(f"a {model.name} log needs at least two angles, increasing from right to left")
+        self._clock = ReplayClock(log.times_s, FREQUENCY_TICKS_PER_HZ / model.default[0])
+        self.period_s = self._clock.period_s
+        self._values = log.values
+
+    def scan_configuration(self) -> dict[str, float]:
+        """The scene options of the offered scan configuration nearest the log's rate and spacing."""
+        resolution_ticks = float(np.median(np.diff(np.degrees(self._angles)))) * ANGLE_TICKS_PER_DEG
+        pairs = [(f, r) for f, resolutions in self._sick.scan_configs.items() for r in resolutions]
+        frequency, resolution = min(pairs, key=lambda pair: (abs(FREQUENCY_TICKS_PER_HZ / pair[0] - self.period_s),
+                                                            abs(pair[1] - resolution_ticks)))
+        return {"scan_frequency_hz": frequency / FREQUENCY_TICKS_PER_HZ, "resolution_deg": resolution / ANGLE_TICKS_PER_DEG}
+
+    def scan(self, time_s: float, *, frequency_ticks: int | None = None, resolution_ticks: int | None = None,
+             fog_filter: bool = False) -> Scan:
+        sick = self._sick
+        count = sick.beam_count(resolution_ticks or sick.default[1])
+        wanted = np.radians(np.linspace(sick.start_deg, sick.stop_deg, count) - 90.0)
+        nearest = np.clip(np.searchsorted(self._angles, wanted), 1, len(self._angles) - 1)
+        left_closer = np.abs(self._angles[nearest - 1] - wanted) <= np.abs(self._angles[nearest] - wanted)
+        nearest = np.where(left_closer, nearest - 1, nearest)
+        found = np.abs(self._angles[nearest] - wanted) <= ANGLE_TOLERANCE_RAD
+        values = np.where(found, self._values[self._clock.row_at(time_s)][nearest], 0)
+        echoes = np.full((count, sick.echoes), -1, np.int64)
+        echoes[:, 0] = np.where(values > 0, values, -1)
+        powers = np.where(echoes >= 0, 0, -1)
+        return Scan(self.name, self.model, time_s, wanted, values, "mm", None, np.zeros(count, np.int64), echoes, powers)
+
+    def scans(self, times_s: Sequence[float], **request: object) -> list[Scan]:
+        """`scan` at each of `times_s` (a table look-up each: nothing to share)."""
+        return [self.scan(t, **request) for t in times_s]
+
+
 def _convert_unit(values: np.ndarray, from_unit: str, to_unit: str) -> np.ndarray:
     if from_unit == to_unit:
         return values
@@ -146,8 +196,10 @@ def _check_model(log: Log, model: str) -> None:
         raise UserError(f"the log was recorded from a {log.header.model}, not a {model}")
 
 
-def replay_sensor(log: Log, model: str, name: str) -> HokuyoReplay | LmsReplay:
-    """The replaying sensor for `model` (a Hokuyo's or "lms200")."""
+def replay_sensor(log: Log, model: str, name: str) -> HokuyoReplay | LmsReplay | ColaReplay:
+    """The replaying sensor for `model` (a Hokuyo's, "lms200" or a CoLa SICK's)."""
+    if model in SICK_MODELS:
+        return ColaReplay(log, name, SICK_MODELS[model])
     if model in HOKUYO_MODELS:
         return HokuyoReplay(log, name, HOKUYO_MODELS[model])
     if model == LMS_MODEL:

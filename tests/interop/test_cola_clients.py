@@ -9,12 +9,16 @@ written from SICK's telegram listing, independently of the emulator's encoder.
 
 from __future__ import annotations
 
+import http.client
 import json
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
+
+from test_replay_clients import replaying
 
 from emulator.bench.cola_client import ColaClient
 from protocols.cola.framing import Dialect
@@ -54,6 +58,17 @@ def _scan_cli(scene: Path, time_s: float) -> list[int]:
     return json.loads(result.stdout)["values"]
 
 
+def _get(url: str, path: str) -> tuple[int, dict]:
+    host, port = url.split("//", 1)[1].rstrip("/").split(":")
+    connection = http.client.HTTPConnection(host, int(port), timeout=10)
+    try:
+        connection.request("GET", path)
+        response = connection.getresponse()
+        return response.status, json.loads(response.read())
+    finally:
+        connection.close()
+
+
 def test_a_streamed_cola_b_scan_equals_lrf_emulator_scan_at_its_stamp(serve, tmp_path: Path) -> None:
     scene = _room(tmp_path, "tim571")
     daemon = serve(scene)
@@ -86,3 +101,34 @@ def test_settings_are_one_across_the_units_endpoints_and_outlive_connections(ser
         binary_client.send(b"sRN LMDscandata")
         scan = binary_client.scan()
         assert scan.channels == ["DIST1", "DIST2", "RSSI1", "RSSI2"] and len(scan.distances) == 1081
+
+
+def test_the_control_api_serves_a_cola_sensors_scans_as_its_clients_get_them(serve, tmp_path: Path) -> None:
+    scene = _room(tmp_path, "tim571")
+    daemon = serve(scene)
+    host, port = daemon.endpoint("sick", "tcp").address
+    with ColaClient(host, port, Dialect.ASCII) as client:
+        assert client.ask(b"sEN LMDscandata 1") == b"sEA LMDscandata 1"
+        streamed = {scan.transmission_us: scan.distances for scan in (client.scan() for _ in range(3))}
+        status, answer = _get(daemon.control_url, "/api/sensors/sick/scan")
+    assert status == 200 and answer["model"] == "tim571" and len(answer["values"]) == 811
+    assert answer["scan_time"] == pytest.approx(1 / 15)
+    assert answer["time_s"] * 15 == pytest.approx(round(answer["time_s"] * 15), abs=1e-4)  # on the unit's scan grid
+    if round(answer["time_s"] * 1e6) in streamed:
+        assert streamed[round(answer["time_s"] * 1e6)] == answer["values"]
+    assert answer["values"] == _scan_cli(scene, answer["time_s"])
+
+
+def test_a_recorded_cola_log_replays_through_the_real_protocol(tmp_path: Path) -> None:
+    scene = _room(tmp_path, "lms111")
+    log = tmp_path / "lms111.log"
+    subprocess.run([str(Path(sys.executable).with_name("lrf-emulator")), "record", str(scene), "--sensor", "sick",
+                    "--end", "1", "--out", str(log)], capture_output=True, text=True, timeout=120, check=True)
+    recorded = [[int(value) for value in line.split()[2::2]] for line in log.read_text().splitlines()
+                if line and not line.startswith("#")]
+    with replaying(log, "lms111", "tcp:127.0.0.1:0", tmp_path) as ready:
+        with ColaClient(*ready.address, Dialect.BINARY) as client:
+            assert client.ask(b"sRN LMPscancfg")[15:19] == (5000).to_bytes(4, "big")  # 50 Hz, as recorded
+            client.send(b"sRN LMDscandata")
+            scan = client.scan()
+    assert len(scan.distances) == 541 and scan.distances in recorded
