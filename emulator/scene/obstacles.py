@@ -11,10 +11,11 @@ centre moves continuously from outside, so it meets an outline before it
 could be inside one). Solids on moving bodies (a door, another robot) do
 not stop it.
 
-`travel_time` follows the centre along a twist's arc at most every
-`STEP_M` of path (a rotation in place never moves the centre of a round
-footprint, so only the path matters), finds the first sample closer than
-`radius` and still closing in, and narrows the contact between it and the
+`travel_time` follows the centre along a twist's arc every `STEP_M` of
+path (a rotation in place never moves the centre of a round footprint, so
+only the path matters; the spans of path that cannot reach a solid are
+screened out first, every `COARSE_STEPS` samples), finds the first sample
+closer than `radius` and still closing in, and narrows the contact between it and the
 last free sample by bisection on the exact arc. The body therefore stops
 touching the solid (its clearance `radius`, to a few nm), never inside it;
 closing in by less than `CONTACT_TOLERANCE_M` is not a collision, so a body
@@ -36,6 +37,7 @@ from emulator.scene.model import Scene
 
 STEP_M = 0.001  # path between two samples of the centre: a grazed corner is missed by at most ~0.4 µm
 CONTACT_TOLERANCE_M = 1e-6  # a centre this much inside `radius` still counts as touching, not hitting
+COARSE_STEPS = 20  # the path is screened every 20 samples (2 cm); only the spans that may touch are sampled finely
 SAMPLES_PER_PASS = 256  # centre samples compared with the outlines at once: a blocked twist ends early
 REFINEMENTS = 4  # rounds narrowing the contact between the last free and the first blocked sample
 REFINE_SAMPLES = 32  # intervals each round splits into
@@ -140,13 +142,11 @@ class Obstacles:
             return horizon_s
         step_s = STEP_M / speed
         count = int(np.ceil(horizon_s / step_s))
+        nearby, samples = self._samples_near_solids(drive.radius, position, quaternion, twist, count, step_s, horizon_s, outlines)
         previous: tuple[float, float] | None = None  # (time, clearance) of the last sample
-        for first in range(0, count + 1, SAMPLES_PER_PASS):
-            times = np.minimum(np.arange(first, min(first + SAMPLES_PER_PASS, count + 1)) * step_s, horizon_s)
-            centres = _centres(position, quaternion, twist, times)
-            reach = drive.radius + STEP_M
-            nearby = outlines.near(centres.min(axis=0) - reach, centres.max(axis=0) + reach)
-            clearances = nearby.clearance(centres)
+        for first in range(0, len(samples), SAMPLES_PER_PASS):
+            times = np.minimum(samples[first:first + SAMPLES_PER_PASS] * step_s, horizon_s)
+            clearances = nearby.clearance(_centres(position, quaternion, twist, times))
             before = np.concatenate([[previous[1] if previous else -np.inf], clearances[:-1]])
             blocked = np.flatnonzero((clearances < drive.radius - CONTACT_TOLERANCE_M) & (clearances < before))
             if len(blocked):
@@ -157,6 +157,29 @@ class Obstacles:
                 return _contact(nearby, drive.radius, position, quaternion, twist, free_time, float(times[index]))
             previous = (float(times[-1]), float(clearances[-1]))
         return horizon_s
+
+    @staticmethod
+    def _samples_near_solids(radius: float, position: np.ndarray, quaternion: np.ndarray, twist: np.ndarray,
+                             count: int, step_s: float, horizon_s: float, outlines: Outlines) -> tuple[Outlines, np.ndarray]:
+        """The outlines near the path, and which of its samples 0..count (every STEP_M) can meet them.
+
+        The clearance changes no faster than the centre moves, so between two coarse samples COARSE_M
+        of path apart with clearances d1, d2 it stays above (d1 + d2 - COARSE_M) / 2: where that is
+        at least the radius, the samples in between cannot touch anything and are skipped.
+        """
+        every = COARSE_STEPS
+        coarse = np.append(np.arange(0, count, every), count)
+        centres = _centres(position, quaternion, twist, np.minimum(coarse * step_s, horizon_s))
+        reach = radius + every * STEP_M
+        nearby = outlines.near(centres.min(axis=0) - reach, centres.max(axis=0) + reach)
+        clearance = np.minimum(nearby.clearance(centres), reach)  # a far outline left out: at most reach away
+        spans = np.diff(coarse) * STEP_M
+        lowest = (clearance[:-1] + clearance[1:] - spans) / 2
+        unsafe = np.flatnonzero(lowest < radius)
+        if not len(unsafe):
+            return nearby, np.zeros(0, dtype=np.int64)
+        ranges = [np.arange(coarse[i], coarse[i + 1] + 1) for i in unsafe]
+        return nearby, np.unique(np.concatenate(ranges))
 
 
 def _centres(position: np.ndarray, quaternion: np.ndarray, twist: np.ndarray, times: np.ndarray) -> np.ndarray:
