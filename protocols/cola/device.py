@@ -57,6 +57,13 @@ AUTHORIZED_CLIENT = 3
 STATE_MEASURING = 7  # STlms: ready for measurement
 STATE_IDLE = 3
 ECHO_FIRST, ECHO_ALL, ECHO_LAST = 0, 1, 2
+# Filters and encoder settings drivers write at start-up (sick_scan_xd, comma's LMS driver): taken and
+# answered like the unit, without effect on the scans.
+ACCEPTED_SETTINGS: dict[bytes, tuple[str, ...]] = {
+    b"LFPparticle": ("u8", "u16"), b"LFPmeanfilter": ("u8", "u16", "u8"), b"LFPnto1filter": ("u8",),
+    b"LICsrc": ("u8",), b"LICencset": ("u8",), b"DO3And4Fnc": ("u8",), b"CLNFDigFilterEn": ("u8",),
+    b"CLHWGating": ("u8",),
+}
 
 
 class ScanValues(Protocol):
@@ -230,6 +237,8 @@ class ColaDevice:
             (b"sEN", b"LMDscandata"): (b"sEA", self._stream_scans),
             (b"sWN", b"EIHstCola"): (b"sWA", self._accept(("u8",))),
         }
+        for name, kinds in ACCEPTED_SETTINGS.items():
+            self._handlers[(b"sWN", name)] = (b"sWA", self._accept(kinds))
         if unit.model.has_echo_filter:
             self._handlers[(b"sRN", b"FREchoFilter")] = (b"sRA", lambda a, d, n: [u8(self.unit.settings.echo_filter)])
             self._handlers[(b"sWN", b"FREchoFilter")] = (b"sWA", self._set_echo_filter)

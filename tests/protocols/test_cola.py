@@ -104,6 +104,22 @@ def test_cola_b_replies_byte_for_byte():
     assert ask_b(dev, b"sRN NoSuchVariable") == b_frame(b"sFA \x00\x0b")
 
 
+def test_start_up_filters_are_taken_like_the_unit_and_echo_settings_only_where_it_has_them():
+    dev = device()
+    ask(dev, b"sMN SetAccessMode 03 F4724744")
+    assert ask(dev, b"sWN LFPmeanfilter 0 +3 0") == b"\x02sWA LFPmeanfilter\x03"
+    assert ask(dev, b"sWN LFPparticle 0 +500") == b"\x02sWA LFPparticle\x03"
+    assert ask(dev, b"sWN LFPparticle 0") == b"\x02sFA 8\x03"
+    assert ask(dev, b"sWN FREchoFilter 2") == b"\x02sFA B\x03"  # a TiM5xx has one echo and no echo filter
+    lms = device(LMS5)
+    ask(lms, b"sMN SetAccessMode 03 F4724744")
+    assert ask(lms, b"sWN FREchoFilter 2") == b"\x02sWA FREchoFilter\x03"
+    assert ask(lms, b"sRN FREchoFilter") == b"\x02sRA FREchoFilter 2\x03"
+    assert ask(lms, b"sWN MSsuppmode 1") == b"\x02sWA MSsuppmode\x03"
+    assert lms.scan_request()["fog_filter"] is True  # the fog filter reaches the physics
+    assert ask(lms, b"sWN FREchoFilter 3") == b"\x02sFA 4\x03"
+
+
 def test_errors_are_the_units_sfa_codes():
     dev = device()
     assert ask(dev, b"sWN LMDscandatacfg 01 00 1 1 0 00 00 0 0 0 0 +1") == b"\x02sFA A\x03"  # not logged in
