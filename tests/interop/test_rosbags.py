@@ -222,3 +222,17 @@ def test_a_wrong_sensor_list_is_one_line_exit_2(tmp_path: Path, sensors: str, fm
     result = run("record", "rescue", "--sensor", sensors, "--end", "0.2", "--format", fmt, "--out", "x", cwd=tmp_path)
     assert result.returncode == 2 and words in result.stderr and "Traceback" not in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1 and not (tmp_path / "x").exists()
+
+
+def test_a_velocity_driven_session_recorded_as_a_bag_carries_the_commanded_twist(tmp_path: Path) -> None:
+    """rescue-live's robot driven by a twist (an event log as `serve --events` writes it): the bag's ground-truth
+    odometry moves at the commanded velocity in base_link until the watchdog (0.5 s) stops it."""
+    (tmp_path / "session.jsonl").write_text('{"t": 1.0, "op": "twist", "name": "robot", "vx": 0.3, "vy": 0.0, "wz": 0.5}\n')
+    result = run("record", "rescue-live", "--sensor", "urg", "--start", "0.5", "--end", "2", "--format", "rosbag2",
+                 "--out", "live", "--events-in", "session.jsonl", cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    odometry = {round((t - EPOCH_NS) / 1e9, 2): m.twist.twist for t, m in read_all(tmp_path / "live")["/odom"]}
+    driving = [twist for t, twist in odometry.items() if 1.0 < t < 1.5]
+    assert len(driving) == 24
+    assert all(abs(w.linear.x - 0.3) < 1e-6 and abs(w.linear.y) < 1e-3 and abs(w.angular.z - 0.5) < 1e-6 for w in driving)
+    assert all(w.linear.x == 0.0 for t, w in odometry.items() if t < 1.0 or t > 1.5)
