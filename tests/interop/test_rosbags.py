@@ -234,5 +234,6 @@ def test_a_velocity_driven_session_recorded_as_a_bag_carries_the_commanded_twist
     odometry = {round((t - EPOCH_NS) / 1e9, 2): m.twist.twist for t, m in read_all(tmp_path / "live")["/odom"]}
     driving = [twist for t, twist in odometry.items() if 1.0 < t < 1.5]
     assert len(driving) == 24
-    assert all(abs(w.linear.x - 0.3) < 1e-6 and abs(w.linear.y) < 1e-3 and abs(w.angular.z - 0.5) < 1e-6 for w in driving)
+    # central differences over 40 ms of an arc: the chord is shorter than the arc by (0.02 rad)² / 24
+    assert all(abs(w.linear.x - 0.3) < 1e-4 and abs(w.linear.y) < 1e-3 and abs(w.angular.z - 0.5) < 1e-6 for w in driving)
     assert all(w.linear.x == 0.0 for t, w in odometry.items() if t < 1.0 or t > 1.5)
