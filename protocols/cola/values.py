@@ -72,12 +72,36 @@ def array(values: np.ndarray, kind: str) -> Value:
     return Value(kind, values)
 
 
+def _u16_table() -> tuple[np.ndarray, np.ndarray]:
+    """Every u16's CoLa-A token, left-aligned with its trailing space ((65536, 5) chars), and which of
+    the five are its own (digits and space)."""
+    values = np.arange(1 << 16, dtype=np.uint64)
+    digits = np.maximum(_digit_counts(values), 1)
+    nibbles = (values[:, None] >> (np.arange(3, -1, -1, dtype=np.uint64) * np.uint64(4))[None, :]) & np.uint64(0xF)
+    right_aligned = _HEX_DIGITS[nibbles.astype(np.intp)]  # "003F"
+    shift = (4 - digits)[:, None]  # drop the leading zeros: column j takes column j + shift
+    columns = np.minimum(np.arange(5)[None, :] + shift, 4)
+    table = np.take_along_axis(np.concatenate([right_aligned, np.full((len(values), 1), ord(" "), np.uint8)], axis=1),
+                               columns, axis=1)
+    table[np.arange(5)[None, :] == digits[:, None]] = ord(" ")
+    return table, np.arange(5)[None, :] <= digits[:, None]
+
+
 def hex_tokens(values: np.ndarray) -> bytes:
     """Non-negative integers as upper-case hex without leading zeros, each followed by a space
-    (vectorised: the digits of every value at once, then the significant ones kept)."""
-    values = np.asarray(values, dtype=np.uint64)
+    (vectorised: u16 values read their tokens off a table; wider ones get their digits computed
+    all at once, the significant ones kept)."""
+    values = np.asarray(values)
     if values.size == 0:
         return b""
+    if int(values.max()) <= 0xFFFF and int(values.min()) >= 0:
+        global _U16_TOKENS
+        if _U16_TOKENS is None:
+            _U16_TOKENS = _u16_table()
+        table, own = _U16_TOKENS
+        index = values.astype(np.intp)
+        return np.take(table, index, axis=0).ravel()[np.take(own, index, axis=0).ravel()].tobytes()
+    values = values.astype(np.uint64)
     width = max(1, (int(values.max()).bit_length() + 3) // 4)
     shifts = np.arange(width - 1, -1, -1, dtype=np.uint64) * np.uint64(4)
     nibbles = (values[:, None] >> shifts[None, :]) & np.uint64(0xF)
@@ -88,6 +112,9 @@ def hex_tokens(values: np.ndarray) -> bytes:
     keep = np.ones((len(values), width + 1), bool)
     keep[:, :width] = digits
     return chars[keep].tobytes()
+
+
+_U16_TOKENS: tuple[np.ndarray, np.ndarray] | None = None
 
 
 def _digit_counts(values: np.ndarray) -> np.ndarray:
