@@ -1,14 +1,15 @@
-"""A real `serve` streaming N URG-04LX to N real clients: CPU per scan, rate, jitter.
+"""A real `serve` streaming N Hokuyos to N real clients: CPU per scan, rate, jitter.
 
 The scene is railway's world (its geometry, smoke and plume) with its sensors
-replaced by N URG-04LX side by side (and, for the moonshot row, M LMS200 at
-500 kBd), each on `tcp:127.0.0.1:0`. One client per sensor connects over TCP
+replaced by N Hokuyos of one model side by side (URG-04LX; the UST-10LX row:
+8 of them at 40 Hz) (and, for the moonshot row, M LMS200 at 500 kBd), each on
+`tcp:127.0.0.1:0`. One client per sensor connects over TCP
 and asks for an unlimited MD stream (an LMS200: mode 24, every scan); a single
 selector thread in this process reads all sockets and notes when each scan
 message ends. Over the measuring window:
 
-- rate: scans received / scans due (10 per second per sensor);
-- jitter: |Δt − 100 ms| between consecutive scans of one sensor, p50 and p99
+- rate: scans received / scans due (10 per second per URG-04LX, 40 per UST-10LX);
+- jitter: |Δt − period| between consecutive scans of one sensor, p50 and p99
   over all sensors' periods;
 - lateness: each scan's arrival against its slot (the scan's own timestamp,
   with the sensor's least-delayed scan defining the offset); "on time" is
@@ -39,11 +40,12 @@ import numpy as np
 
 from emulator.bench.serve_process import ServeProcess
 from emulator.scene import bundled_scenes
+from emulator.sensors.hokuyo_models import HOKUYO_MODELS
 from protocols.lms2xx import build_telegram
 from protocols.scip.encoding import decode_values
 
-MD_UNLIMITED = b"MD0044072501000\n"
-SCAN_PERIOD_S = 0.1
+URG_MODEL = "urg-04lx"
+SCAN_PERIOD_S = 0.1  # the URG-04LX's; other Hokuyos: their model's period
 LMS_BAUD = 500_000
 LMS_EVERY_SCAN = build_telegram(0x00, b"\x20\x24")  # continuous output of every scan
 LMS_PERIOD_S = 2 / 75  # 0.5°: two mirror revolutions per scan; 732 bytes take 14.6 ms at 500 kBd
@@ -52,9 +54,17 @@ WARM_UP_S = 3.0
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 
 
-def fleet_scene_text(count: int, lms_count: int = 0) -> str:
-    """railway's world with `count` URG-04LX (urg00, urg01, ...) side by side, and `lms_count` LMS200
-    (lms00, ...) at 500 kBd, each on a free TCP port."""
+def md_unlimited(hokuyo: str) -> bytes:
+    """An unlimited MD stream of the model's measured steps AMIN..AMAX."""
+    model = HOKUYO_MODELS[hokuyo]
+    return b"MD%04d%04d01000\n" % (model.first_valid_step, model.last_valid_step)
+
+
+
+
+def fleet_scene_text(count: int, lms_count: int = 0, hokuyo: str = URG_MODEL) -> str:
+    """railway's world with `count` Hokuyos of model `hokuyo` (URG-04LX: urg00, urg01, ...; others named
+    by `sensor_name`) side by side, and `lms_count` LMS200 (lms00, ...) at 500 kBd, each on a free TCP port."""
     railway = next(bundled for bundled in bundled_scenes() if bundled.name == "railway")
     text = Path(railway.path).read_text()
     world = text[: text.index("[[sensors]]")]
@@ -62,7 +72,7 @@ def fleet_scene_text(count: int, lms_count: int = 0) -> str:
     for index in range(count):
         y = -0.6 + 1.2 * index / max(1, count - 1)
         sensors.append(
-            f'[[sensors]]\nname = "{urg_name(index)}"\nmodel = "urg-04lx"\n'
+            f'[[sensors]]\nname = "{sensor_name(hokuyo, index)}"\nmodel = "{hokuyo}"\n'
             f'position = [0.25, {y:.4f}, 0.3]\nendpoints = ["tcp:127.0.0.1:0"]\n'
         )
     for index in range(lms_count):
@@ -76,6 +86,11 @@ def fleet_scene_text(count: int, lms_count: int = 0) -> str:
 
 def urg_name(index: int) -> str:
     return f"urg{index:02d}"
+
+
+def sensor_name(hokuyo: str, index: int) -> str:
+    """urg00, ... for URG-04LX; ust-10lx-00, ... for the others."""
+    return urg_name(index) if hokuyo == URG_MODEL else f"{hokuyo}-{index:02d}"
 
 
 def lms_name(index: int) -> str:
@@ -160,32 +175,35 @@ class _LmsStream:
 
 
 def measure_serve(
-    count: int, duration_s: float, workers: int | None = None, model: str = "physical", lms_count: int = 0
+    count: int, duration_s: float, workers: int | None = None, model: str = "physical", lms_count: int = 0,
+    hokuyo: str = URG_MODEL,
 ) -> dict:
-    """Start `serve` with `count` URGs (and `lms_count` LMS200 at 500 kBd) under preset `model`,
-    stream them all to as many clients, measure `duration_s`."""
+    """Start `serve` with `count` Hokuyos of model `hokuyo` (and `lms_count` LMS200 at 500 kBd) under
+    preset `model`, stream them all to as many clients, measure `duration_s`."""
     with tempfile.TemporaryDirectory(prefix="lrf-bench-serve-") as folder:
-        scene = Path(folder) / f"urg-x{count}-lms-x{lms_count}.toml"
-        scene.write_text(fleet_scene_text(count, lms_count))
-        names = [urg_name(index) for index in range(count)] + [lms_name(index) for index in range(lms_count)]
+        scene = Path(folder) / f"{hokuyo}-x{count}-lms-x{lms_count}.toml"
+        scene.write_text(fleet_scene_text(count, lms_count, hokuyo))
+        names = [sensor_name(hokuyo, index) for index in range(count)] + [lms_name(index) for index in range(lms_count)]
         endpoints = [f"{name}=tcp:127.0.0.1:0" for name in names]
         extra = ["--model", model, *(["--workers", str(workers)] if workers is not None else [])]
         with ServeProcess(scene, endpoints, extra_args=extra, timeout_s=300.0) as daemon:
-            streams = _stream_all(daemon, count, lms_count, duration_s)
+            streams = _stream_all(daemon, count, lms_count, duration_s, hokuyo=hokuyo)
             load = os.getloadavg()
-    return {"model": model, **_figures(count, lms_count, duration_s, workers, streams, load)}
+    period_s = HOKUYO_MODELS[hokuyo].period_s
+    return {"model": model, "hokuyo": hokuyo, **_figures(count, lms_count, duration_s, workers, streams, load, period_s)}
 
 
 def _stream_all(
-    daemon: ServeProcess, count: int, lms_count: int, duration_s: float, on_window: Callable[[], None] | None = None
+    daemon: ServeProcess, count: int, lms_count: int, duration_s: float, on_window: Callable[[], None] | None = None,
+    hokuyo: str = URG_MODEL,
 ) -> tuple[list[_Stream], list[_LmsStream], tuple[float, float]]:
     """Stream from every sensor; `on_window` is called as the measuring window opens and closes."""
     selector = selectors.DefaultSelector()
     streams: list[_Stream] = []
     lms_streams: list[_LmsStream] = []
     for index in range(count):
-        sock = socket.create_connection(daemon.endpoint(urg_name(index)).address, timeout=5)
-        sock.sendall(MD_UNLIMITED)
+        sock = socket.create_connection(daemon.endpoint(sensor_name(hokuyo, index)).address, timeout=5)
+        sock.sendall(md_unlimited(hokuyo))
         streams.append(_Stream(sock))
     for index in range(lms_count):
         sock = socket.create_connection(daemon.endpoint(lms_name(index)).address, timeout=5)
@@ -224,12 +242,12 @@ def _stream_all(
 
 def _figures(
     count: int, lms_count: int, duration_s: float, workers: int | None,
-    measured: tuple[list[_Stream], list[_LmsStream], tuple[float, float]], load: tuple,
+    measured: tuple[list[_Stream], list[_LmsStream], tuple[float, float]], load: tuple, period_s: float = SCAN_PERIOD_S,
 ) -> dict:
     streams, lms_streams, (cpu, daemon_cpu) = measured
     received = sum(len(stream.arrivals) for stream in streams)
     lms_received = sum(len(stream.arrivals) for stream in lms_streams)
-    due = count * duration_s / SCAN_PERIOD_S
+    due = count * duration_s / period_s
     periods, lateness = [], []
     for stream in streams:
         if len(stream.arrivals) < 2:
@@ -238,7 +256,7 @@ def _figures(
         periods.append(np.diff(arrivals))
         offset = arrivals - stamps
         lateness.append((offset - offset.min()) * 1000.0)
-    jitter = np.abs(np.concatenate(periods) - SCAN_PERIOD_S) * 1000.0 if periods else np.array([np.nan])
+    jitter = np.abs(np.concatenate(periods) - period_s) * 1000.0 if periods else np.array([np.nan])
     late = np.concatenate(lateness) if lateness else np.array([np.nan])
     scans = received + lms_received
     row = {
@@ -274,14 +292,14 @@ def _figures(
 
 def table_lines(rows: list[dict]) -> list[str]:
     lines = [
-        "serve: a real daemon streaming N URG-04LX (railway's world) to N TCP clients; one run each, no best-of;"
+        "serve: a real daemon streaming N Hokuyos (railway's world) to N TCP clients; one run each, no best-of;"
         f" on time = within {ON_TIME_MS:g} ms of its slot; CPU = daemon + workers (/proc/PID/stat)",
-        f"  {'model':<11} {'N':>3} {'workers':>7} {'rate':>7} {'on time':>8} {'jitter p50':>10} {'p99 ms':>7}"
+        f"  {'model':<11} {'N':>3} {'sensor':<9} {'workers':>7} {'rate':>7} {'on time':>8} {'jitter p50':>10} {'p99 ms':>7}"
         f" {'late p99':>8} {'max ms':>7} {'CPU ms/scan':>11} {'of it loop':>10} {'cores':>6}  load avg",
     ]
     for row in rows:
         lines.append(
-            f"  {row['model']:<11} {row['sensors']:>3} {row['workers']!s:>7} {row['rate']:>7.1%} {row['on_time']:>8.2%}"
+            f"  {row['model']:<11} {row['sensors']:>3} {row.get('hokuyo', URG_MODEL):<9} {row['workers']!s:>7} {row['rate']:>7.1%} {row['on_time']:>8.2%}"
             f" {row['jitter_p50_ms']:>10.2f} {row['jitter_p99_ms']:>7.2f} {row['lateness_p99_ms']:>8.2f}"
             f" {row['lateness_max_ms']:>7.1f} {row['cpu_ms_per_scan']:>11.2f} {row['daemon_cpu_ms_per_scan']:>10.2f}"
             f" {row['cpu_cores']:>6.2f}"
@@ -299,12 +317,17 @@ def table_lines(rows: list[dict]) -> list[str]:
 MOONSHOT = (100, 20, "formsma2011")  # URG-04LX, LMS200 at 500 kBd, preset: the fleet-sized row
 
 
+UST_ROW = (8, "ust-10lx")  # one daemon, eight UST-10LX at 40 Hz: every scan on time, jitter p99 <= 1 ms
+
+
 def bench_section(quick: bool) -> tuple[dict, list[str]]:
-    """`lrf-emulator bench --section serve`: N = 1, 10, 40 URGs under `physical`, then the moonshot
-    (100 URGs + 20 LMS200 under `formsma2011`; not in a quick run: its start-up alone takes ~10 s).
-    Quick: 5 s each, else 30 s."""
+    """`lrf-emulator bench --section serve`: N = 1, 10, 40 URGs under `physical`, 8 UST-10LX (40 Hz) under
+    `physical`, then the moonshot (100 URGs + 20 LMS200 under `formsma2011`; not in a quick run: its
+    start-up alone takes ~10 s). Quick: 5 s each, else 30 s."""
     duration = 5.0 if quick else 30.0
     rows = [measure_serve(count, duration) for count in (1, 10, 40)]
+    count, hokuyo = UST_ROW
+    rows.append(measure_serve(count, duration, hokuyo=hokuyo))
     if not quick:
         urgs, lms, model = MOONSHOT
         rows.append(measure_serve(urgs, duration, model=model, lms_count=lms))

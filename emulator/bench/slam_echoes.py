@@ -53,8 +53,12 @@ class Run:
 
 
 def with_utm_on_the_urgs_mount(scene: Scene) -> Scene:
-    """`scene` with a UTM-30LX-EW named `utm` where its URG-04LX is (same body, same pose), served nowhere."""
+    """`scene` with a UTM-30LX-EW named `utm` where its URG-04LX is (same body, same pose), served nowhere
+    (`rescue` carries one there already: then the scene as it is)."""
     urg = scene.sensor(URG)
+    present = next((spec for spec in scene.sensors if spec.name == UTM), None)
+    if present is not None and (present.model, present.body, present.pose) == (UTM_MODEL, urg.body, urg.pose):
+        return scene
     utm = dataclasses.replace(urg, name=UTM, model=UTM_MODEL, endpoints=(), options={})
     return dataclasses.replace(scene, sensors=(*scene.sensors, utm))
 

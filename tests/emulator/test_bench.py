@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import subprocess
@@ -26,11 +27,20 @@ def test_bench_json_reports_every_bundled_sensor_and_every_section():
     expected = {(scene, name, spec.model) for (scene, name), spec in specs.items()}
     # every scene and sensor under every preset, once; and railway with 10 000 live particles
     dense = {("railway-10k", name, model) for scene, name, model in expected if scene == "railway"}
+    # and the SCIP 2.2 Hokuyos each of rescue and railway lacks, on its URG's mount
+    mounted = {
+        (f"{scene}-hokuyos", model, model)
+        for scene in ("rescue", "railway") for model in ("utm-30lx", "utm-30lx-ew", "ust-10lx", "ust-20lx")
+        if model not in {spec.model for spec in load_scene(scene).sensors}
+    }
+    assert ("rescue-hokuyos", "ust-10lx", "ust-10lx") in mounted and ("railway-hokuyos", "utm-30lx-ew", "utm-30lx-ew") in mounted
     scan_rows = [(row["scene"], row["sensor"], row["model"], row["preset"]) for row in report["scans"]]
     assert len(scan_rows) == len(set(scan_rows))
-    assert set(scan_rows) == {(*key, preset) for key in expected | dense for preset in ("formsma2011", "physical")}
+    assert set(scan_rows) == {(*key, preset) for key in expected | dense | mounted for preset in ("formsma2011", "physical")}
     for scene, name, _ in dense:
         specs[scene, name] = specs["railway", name]
+    for scene, name, model in mounted:
+        specs[scene, name] = dataclasses.replace(specs[scene.removesuffix("-hokuyos"), "urg"], name=name, model=model, options={})
     for row in report["scans"]:
         assert row["scan_ms"] > 0 and row["max_scan_ms"] >= row["scan_ms"]
         spec = specs[row["scene"], row["sensor"]]
@@ -38,6 +48,8 @@ def test_bench_json_reports_every_bundled_sensor_and_every_section():
             assert row["period_ms"] == 100.0
         elif spec.model in SICK_MODELS:  # a CoLa SICK: one turn per scan at its scan frequency
             assert math.isclose(row["period_ms"], 1000.0 / float(spec.options["scan_frequency_hz"]))
+        elif spec.model in ("utm-30lx", "utm-30lx-ew", "ust-10lx", "ust-20lx"):
+            assert row["period_ms"] == 25.0
         else:  # the mirror's revolutions (13.33 ms each) one scan at that resolution needs
             revolutions = {1.0: 1, 0.5: 2, 0.25: 4}[float(spec.options["resolution_deg"])]
             assert math.isclose(row["period_ms"], revolutions * 1000.0 / 75.0)
@@ -93,8 +105,10 @@ def test_bench_scans_table_has_a_row_per_sensor_and_preset_with_both_figures():
     rows = [line.split() for line in lines[2:] if line.strip()]
     sensors = sum(len(load_scene(bundled.name).sensors) for bundled in bundled_scenes())
     dense = len(load_scene("railway").sensors)  # railway-10k: railway with 10 000 live particles
-    assert len(rows) == 2 * (sensors + dense)  # formsma2011 and physical
-    assert [row[0] for row in rows[-2 * dense :]] == ["railway-10k"] * 2 * dense
+    mounted = 3 + 4  # rescue-hokuyos (rescue has its UTM-30LX-EW), railway-hokuyos
+    assert len(rows) == 2 * (sensors + dense + mounted)  # formsma2011 and physical
+    assert [row[0] for row in rows[-2 * (dense + mounted) : -2 * mounted]] == ["railway-10k"] * 2 * dense
+    assert [row[0] for row in rows[-2 * mounted :]] == ["railway-hokuyos"] * 8 + ["rescue-hokuyos"] * 6
     for row in rows:
         streamed, slowest, slowest_at, alone, period = float(row[4]), float(row[5]), float(row[6]), float(row[7]), float(row[9])
         assert 0 < streamed <= slowest and alone > 0 and 1.0 <= slowest_at <= 60.0

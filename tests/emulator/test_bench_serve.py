@@ -47,3 +47,11 @@ def test_two_urgs_and_an_lms200_streamed_to_their_clients_are_counted_and_timed(
     assert row["cpu_ms_per_scan"] > 0 and row["cpu_cores"] > 0
     assert 0 <= row["jitter_p50_ms"] <= row["jitter_p99_ms"]
     assert 0 <= row["on_time"] <= 1
+
+
+def test_ust_10lx_streams_are_counted_at_their_40_hz() -> None:
+    row = measure_serve(2, 1.5, workers=1, model="formsma2011", hokuyo="ust-10lx")
+    assert row["hokuyo"] == "ust-10lx"
+    assert 100 <= row["scans_received"] <= 140  # 2 sensors × 40/s × 1.5 s
+    assert 0.8 <= row["rate"] <= 1.2
+    assert 0 <= row["jitter_p50_ms"] <= row["jitter_p99_ms"]

@@ -20,9 +20,13 @@ def rescue():
     return load_scene("rescue")
 
 
-def test_the_robot_carries_both_sensors_with_their_endpoints(rescue) -> None:
-    assert {(s.name, s.model, s.body) for s in rescue.sensors} == {("urg", "urg-04lx", "robot"), ("lms", "lms200", "robot")}
+def test_the_robot_carries_its_sensors_with_their_endpoints(rescue) -> None:
+    assert {(s.name, s.model, s.body) for s in rescue.sensors} == {
+        ("urg", "urg-04lx", "robot"), ("utm", "utm-30lx-ew", "robot"), ("lms", "lms200", "robot"),
+    }
     assert rescue.sensor("urg").endpoints == ("pty:ttyURG0", "tcp:127.0.0.1:10940")
+    assert rescue.sensor("utm").endpoints == ("tcp:127.0.0.1:10941",)
+    assert rescue.sensor("utm").pose == rescue.sensor("urg").pose  # the multi-echo unit on the URG's mount
 
 
 def test_the_loop_closes_in_about_a_minute_at_speeds_a_real_robot_has(rescue) -> None:
