@@ -1,4 +1,4 @@
-"""The Hokuyo scanners a scene may name, each described by its numbers (docs/sensors.md).
+"""The Hokuyo scanners a scene may name, each described by its numbers (docs/scene-format.md, "The Hokuyo models").
 
 Code that differs between them reads these attributes instead of testing a
 model's name. Figures: PP replies and the SCIP 2.0 specification C-42-03320B

@@ -40,7 +40,7 @@ class Scan:
     values: np.ndarray
     unit: str = "mm"
     reflector: np.ndarray | None = None  # LMS200: the echo came from a retro-reflector (bool per value)
-    # Scanners that report them (docs/sensors.md): the intensity of each entry of `values` (N,);
+    # Scanners that report them (docs/scene-format.md): the intensity of each entry of `values` (N,);
     # every echo's wire value (N, E), nearest first, -1 where a beam has fewer than E; their intensities.
     intensities: np.ndarray | None = None
     echoes: np.ndarray | None = None
