@@ -58,3 +58,12 @@ def test_smoke_fills_part_of_the_building_during_the_run(rescue) -> None:
     in_smoke = urg.scan(20.0).values[urg04lx.FIRST_VALID_STEP : urg04lx.LAST_VALID_STEP + 1]
     clear = urg.scan(5.0).values[urg04lx.FIRST_VALID_STEP : urg04lx.LAST_VALID_STEP + 1]
     assert np.mean(in_smoke == urg04lx.LOW_INTENSITY) > 0.1 > np.mean(clear == urg04lx.LOW_INTENSITY)
+
+
+def test_the_slam_bench_uses_rescues_own_utm(rescue) -> None:
+    from emulator.bench.slam_echoes import with_utm_on_the_urgs_mount
+
+    assert with_utm_on_the_urgs_mount(rescue) is rescue
+    others = dataclasses.replace(rescue, sensors=tuple(spec for spec in rescue.sensors if spec.name != "utm"))
+    added = with_utm_on_the_urgs_mount(others).sensor("utm")
+    assert (added.model, added.body, added.pose) == ("utm-30lx-ew", "robot", rescue.sensor("urg").pose)
