@@ -1,4 +1,4 @@
-"""The bundled `rescue` scene: a robot's closed 60 s loop through a smoky building, with both sensors on board."""
+"""The bundled `rescue` scene: a robot's closed 60 s loop through a smoky building, with its sensors on board."""
 
 from __future__ import annotations
 
