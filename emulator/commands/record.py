@@ -26,9 +26,10 @@ from __future__ import annotations
 import argparse
 import heapq
 import itertools
+import math
 from pathlib import Path
 
-from emulator.commands.options import add_events_in_option, add_scene_options, add_span_options, scene_from_args, world_from_args
+from emulator.commands.options import MAX_SIMULATED_TIME_S, add_events_in_option, add_scene_options, add_span_options, scene_from_args, world_from_args
 from emulator.commands.progress import progress
 from emulator.errors import UserError
 from emulator.recording.ground_truth import with_ground_truth
@@ -50,11 +51,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "rosbag2 (--out DIR) / rosbag1 (--out FILE.bag): a ROS bag of every --sensor NAME[,NAME...] with tf and odometry",
     )
     bag = parser.add_argument_group("ROS bags (--format rosbag2|rosbag1)")
-    bag.add_argument("--epoch", type=float, default=DEFAULT_EPOCH_S, metavar="UNIX_TIME",
+    bag.add_argument("--epoch", type=bag_epoch, default=DEFAULT_EPOCH_S, metavar="UNIX_TIME",
                      help=f"ROS time of simulated time 0 (default {DEFAULT_EPOCH_S}; serve --epoch takes the same)")
     bag.add_argument("--map-frame", default=FrameNames.map, metavar="NAME", help="REP 105 map frame (default map)")
     bag.add_argument("--odom-frame", default=FrameNames.odom, metavar="NAME", help="REP 105 odom frame (default odom)")
     bag.add_argument("--base-frame", default=FrameNames.base, metavar="NAME", help="the robot's frame (default base_link)")
+
+
+def bag_epoch(text: str) -> float:
+    """An argparse type: the ROS time of simulated time 0, at least 1 s (a scan's first beam precedes its
+    time by up to a scan period, and ROS time is never negative) and below 2^31 s (ROS 1's time)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected UNIX seconds, got {text!r}") from None
+    if not (math.isfinite(value) and 1 <= value < 2**31 - MAX_SIMULATED_TIME_S):
+        raise argparse.ArgumentTypeError(f"must be in 1..{2**31 - MAX_SIMULATED_TIME_S:g} s, got {text!r}")
+    return value
 
 
 def run(args: argparse.Namespace) -> int:

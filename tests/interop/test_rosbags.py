@@ -237,3 +237,11 @@ def test_a_velocity_driven_session_recorded_as_a_bag_carries_the_commanded_twist
     # central differences over 40 ms of an arc: the chord is shorter than the arc by (0.02 rad)² / 24
     assert all(abs(w.linear.x - 0.3) < 1e-4 and abs(w.linear.y) < 1e-3 and abs(w.angular.z - 0.5) < 1e-6 for w in driving)
     assert all(w.linear.x == 0.0 for t, w in odometry.items() if t < 1.0 or t > 1.5)
+
+
+@pytest.mark.parametrize("epoch", ["nan", "0", "-5", "1e20", "abc"])
+def test_an_epoch_a_ros_time_cannot_hold_is_one_line_exit_2(tmp_path: Path, epoch: str) -> None:
+    result = run("record", "rescue", "--sensor", "urg", "--end", "0.2", "--format", "rosbag1", "--out", "x.bag",
+                 "--epoch", epoch, cwd=tmp_path)
+    assert result.returncode == 2 and "--epoch" in result.stderr and "Traceback" not in result.stderr
+    assert not (tmp_path / "x.bag").exists()
