@@ -41,8 +41,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     twist = actions.add_parser(
         "twist", help="twist BODY VX [VY] WZ [--for S]: drive a live body (m/s forward and left, rad/s counter-clockwise)"
     )
-    twist.add_argument("name")
-    twist.add_argument("velocity", nargs="+", type=float, metavar="V")
+    twist.add_argument("name", metavar="BODY", help="a body with trajectory = \"live\"")
+    twist.add_argument("velocity", nargs="+", type=float, metavar="V",
+                       help="VX WZ (a differential drive) or VX VY WZ: m/s forward, m/s to the left, rad/s counter-clockwise")
     twist.add_argument("--for", dest="duration", type=float, default=None, metavar="S",
                        help="keep sending it for S wall seconds (else one command: the body stops after its watchdog)")
     clock = actions.add_parser("clock", help="clock [--speed X] [--pause|--resume]")
