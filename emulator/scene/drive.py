@@ -33,7 +33,7 @@ DEFAULT_CLEARANCE_M = 0.02
 DEFAULT_MAX_SPEED = 1.0  # m/s
 DEFAULT_MAX_TURN_RATE = 2.0  # rad/s
 DEFAULT_WATCHDOG_S = 0.5
-MAX_WATCHDOG_S = 5  # bounds the path one command can cover (and the work of finding where it stops)
+MAX_WATCHDOG_S = 2  # bounds the path one command can cover (max_speed × 2 s) and the work of finding where it stops
 MAX_BODY_SPEED = 10  # m/s: the bound a scene's max_speed may reach
 MAX_BODY_TURN_RATE = 20  # rad/s
 

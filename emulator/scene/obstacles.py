@@ -38,7 +38,8 @@ from emulator.scene.model import Scene
 STEP_M = 0.001  # path between two samples of the centre: a grazed corner is missed by at most ~0.4 µm
 CONTACT_TOLERANCE_M = 1e-6  # a centre this much inside `radius` still counts as touching, not hitting
 COARSE_STEPS = 20  # the path is screened every 20 samples (2 cm); only the spans that may touch are sampled finely
-SAMPLES_PER_PASS = 256  # centre samples compared with the outlines at once: a blocked twist ends early
+SAMPLES_PER_PASS = 256  # centre samples compared with the outlines in the first pass: a blocked twist ends early
+MAX_SAMPLES_PER_PASS = 4096  # later passes double up to this (a long path along a wall: fewer, larger passes)
 REFINEMENTS = 4  # rounds narrowing the contact between the last free and the first blocked sample
 REFINE_SAMPLES = 32  # intervals each round splits into
 
@@ -144,9 +145,14 @@ class Obstacles:
         count = int(np.ceil(horizon_s / step_s))
         nearby, samples = self._samples_near_solids(drive.radius, position, quaternion, twist, count, step_s, horizon_s, outlines)
         previous: tuple[float, float] | None = None  # (time, clearance) of the last sample
-        for first in range(0, len(samples), SAMPLES_PER_PASS):
-            times = np.minimum(samples[first:first + SAMPLES_PER_PASS] * step_s, horizon_s)
-            clearances = nearby.clearance(_centres(position, quaternion, twist, times))
+        first, size = 0, SAMPLES_PER_PASS
+        while first < len(samples):
+            times = np.minimum(samples[first:first + size] * step_s, horizon_s)
+            first, size = first + size, min(2 * size, MAX_SAMPLES_PER_PASS)
+            centres = _centres(position, quaternion, twist, times)
+            reach = drive.radius + STEP_M
+            local = nearby.near(centres.min(axis=0) - reach, centres.max(axis=0) + reach)  # along a long path: few
+            clearances = local.clearance(centres)
             before = np.concatenate([[previous[1] if previous else -np.inf], clearances[:-1]])
             blocked = np.flatnonzero((clearances < drive.radius - CONTACT_TOLERANCE_M) & (clearances < before))
             if len(blocked):
@@ -154,7 +160,7 @@ class Obstacles:
                 free_time, free_clearance = (float(times[index - 1]), float(before[index])) if index else previous
                 if free_clearance < drive.radius - CONTACT_TOLERANCE_M:
                     return free_time  # already closer than the radius, and now closing in: stop here
-                return _contact(nearby, drive.radius, position, quaternion, twist, free_time, float(times[index]))
+                return _contact(local, drive.radius, position, quaternion, twist, free_time, float(times[index]))
             previous = (float(times[-1]), float(clearances[-1]))
         return horizon_s
 
