@@ -39,4 +39,5 @@ def read_bag_laser_scans(path: Path, topic: str | None) -> LaserScans:
 
             return laser_scans(path, topic, messages())
     except (AnyReaderError, OSError, ValueError, KeyError, TypeError, RuntimeError, AssertionError) as error:
-        raise UserError(f"{path.name}: cannot read the bag: {error}") from None
+        first_line = (str(error).strip().splitlines() or [type(error).__name__])[0]  # YAML errors run to many lines
+        raise UserError(f"{path.name}: cannot read the bag: {first_line}") from None

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -245,3 +246,19 @@ def test_an_epoch_a_ros_time_cannot_hold_is_one_line_exit_2(tmp_path: Path, epoc
                  "--epoch", epoch, cwd=tmp_path)
     assert result.returncode == 2 and "--epoch" in result.stderr and "Traceback" not in result.stderr
     assert not (tmp_path / "x.bag").exists()
+
+
+@pytest.mark.parametrize("broken", ["garbage.bag", "bad_yaml", "truncated"])
+def test_a_broken_bag_is_one_line_exit_2(bags: Path, tmp_path: Path, broken: str) -> None:
+    if broken == "garbage.bag":
+        (tmp_path / broken).write_bytes(b"#ROSBAG V2.0\n" + bytes(range(256)) * 4)
+    elif broken == "bad_yaml":
+        (tmp_path / broken).mkdir()
+        (tmp_path / broken / "metadata.yaml").write_text("rosbag2_bagfile_information: [unclosed\n")
+    else:
+        shutil.copytree(bags / "rescue", tmp_path / broken)
+        [storage] = (tmp_path / broken).glob("*.mcap")
+        storage.write_bytes(storage.read_bytes()[:20000])
+    result = run("replay", broken, "--device", "urg-04lx", "--topic", "/urg/scan", "--endpoint", "tcp:127.0.0.1:0", cwd=tmp_path)
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and f"{broken}: cannot read the bag" in result.stderr
