@@ -24,11 +24,13 @@ import aiohttp
 import numpy as np
 import pytest
 from control_support import call
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
 
 from emulator.bench.serve_process import ServeProcess, serve_command
-from emulator.control.events import EventWriter, read_events, world_events
+from emulator.control.events import ControlError, EventWriter, read_events, world_events
 from emulator.control.server import ControlAddress, ControlServer
 from emulator.control.session import LiveSession
 from emulator.daemon.clock import ManualClock
@@ -476,3 +478,38 @@ def test_the_screened_search_stops_where_every_millimetre_sampled_stops() -> Non
         else:
             assert found == horizon
     assert stopped >= 10  # enough of them met something
+
+
+TWIST_VALUES = st.one_of(st.none(), st.booleans(), st.integers(-10**20, 10**20), st.text(max_size=4),
+                         st.floats(allow_nan=True, allow_infinity=True), st.lists(st.floats(), max_size=3))
+TWIST_BODIES = st.one_of(
+    st.dictionaries(st.sampled_from(["vx", "vy", "wz", "speed", "yaw_deg"]), TWIST_VALUES, max_size=4),
+    TWIST_VALUES,
+)
+
+
+@pytest.fixture(scope="module")
+def driven() -> tuple[LiveSession, ManualClock]:
+    """One daemon's session on rescue-live for many examples (its clock only moves forward)."""
+    clock = ManualClock(1.0)
+    daemon = Daemon(load_scene(SCENE), clock=clock, workers=0)
+    yield LiveSession(daemon), clock
+    daemon.close()
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(bodies=st.lists(TWIST_BODIES, min_size=1, max_size=6), steps=st.lists(st.floats(0.0, 0.4), min_size=6, max_size=6))
+def test_whatever_twist_a_client_sends_is_applied_or_refused_and_the_robot_stays_out_of_the_walls(driven, bodies, steps) -> None:
+    session, clock = driven
+    outlines = session.daemon.live.obstacles.outlines(0.02, 0.6)
+    for body, step in zip(bodies, steps):
+        clock.advance(step + 1e-6)
+        try:
+            session.request("twist", "robot", body)
+        except ControlError as error:
+            assert error.status == 400 and error.key.startswith("bodies[robot]"), error
+        clock.advance(0.3)
+        robot = session.state()["bodies"]["robot"]
+        x, y, _ = robot["position"]
+        assert all(math.isfinite(value) for value in (x, y, robot["rotation_deg"][2]))
+        assert outlines.clearance(np.array([[x, y]]))[0] >= RADIUS - 1e-9  # never inside a solid
