@@ -177,6 +177,8 @@ def draw_waterfall(series: SensorSeries, out: Path, *, width_px: int = 1200, hei
     dpi = 100
     side = series.has_regions + series.has_camera_reference + series.has_plumes
     figure = plt.figure(figsize=(width_px / dpi, height_px / dpi), dpi=dpi)
+    # margins in pixels, whatever the image's size: room for the labels (two lines below) and the note
+    figure.subplots_adjust(left=70 / width_px, right=1 - 20 / width_px, bottom=72 / height_px, top=1 - 32 / height_px)
     # the waterfall, its range colour bar, room for the bar's labels, then the side panels
     grid = figure.add_gridspec(1, 3 + side, width_ratios=[3, 0.08, 0.22] + [1] * side, wspace=0.12)
     axes = figure.add_subplot(grid[0, 0])
