@@ -113,14 +113,16 @@ def checked_url(url: str) -> str:
 
 
 def scan_line(scan: dict[str, Any]) -> str:
-    """One scan in a line: time, sensor, how many beams measured, their nearest and the error count."""
+    """One scan in a line: time, sensor, how many beams measured, their nearest and the error count; and
+    how many of the sensor's scans its devices sent late or skipped so far (the daemon was behind)."""
     ranges = [r for r in scan.get("ranges_m", []) if r is not None]
     errors = len(scan.get("ranges_m", [])) - len(ranges)
     nearest = f"{min(ranges):.3f} m" if ranges else "-"
     ahead = _range_ahead(scan)
+    behind = f", late {scan['late']}, skipped {scan['skipped']}" if "late" in scan and "skipped" in scan else ""
     return (
         f"{scan.get('time_s', math.nan):10.3f} s  {scan.get('sensor')}  {len(ranges)} ranges, "
-        f"{errors} errors, nearest {nearest}, ahead {ahead}"
+        f"{errors} errors, nearest {nearest}, ahead {ahead}{behind}"
     )
 
 

@@ -120,14 +120,17 @@ class ScanFeed:
                 if clock.now() < time_s - 1e-6:
                     continue
             scan = await self._scan(spec, time_s)
-            message = await loop.run_in_executor(self._serializer, _scan_message, scan, period)
+            counters = self._daemon.sensor_counters().get(name, {})
+            behind = {key: counters[key] for key in ("late", "skipped") if key in counters}
+            message = await loop.run_in_executor(self._serializer, _scan_message, scan, period, behind)
             for subscriber in list(self._subscribers.get(name, ())):
                 subscriber(message)
             index = max(index + 1, math.floor(clock.now() / period + 1e-9))  # a late feed skips, never bursts
 
 
-def _scan_message(scan: Scan, period_s: float) -> str:
-    return json.dumps({"type": "scan", **scan_json(scan, None, period_s)})
+def _scan_message(scan: Scan, period_s: float, behind: dict[str, int]) -> str:
+    """The scan, and the sensor's counts of scans its devices sent late or skipped so far (the daemon was behind)."""
+    return json.dumps({"type": "scan", **scan_json(scan, None, period_s), **behind})
 
 
 def _retimed(scan: Scan, time_s: float) -> Scan:

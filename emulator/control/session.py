@@ -93,8 +93,11 @@ class LiveSession:
                 state["regions"][region.name] = {"density": live.region_density(index, now)}
             for plume in self.scene.plumes:
                 state["plumes"][plume.name] = live.plume_state(plume.name, now)
+        counters = self.daemon.sensor_counters()
         for spec in self.scene.sensors:
             state["sensors"][spec.name] = {"pose": pose_json(spec.pose), "clients": self.daemon.clients(spec.name)}
+            if spec.name in counters:  # behind: scans sent after a fresher one was due, and never sent
+                state["sensors"][spec.name] |= {key: counters[spec.name][key] for key in ("late", "skipped")}
         return state
 
     def live_poses(self) -> dict[str, Any]:

@@ -7,6 +7,18 @@ request at a constant stride, as a streaming device makes) is computed
 SCAN_BATCH scans per job with `sensor.scans`, which shares each numpy pass
 among them; a request nobody foresaw is still computed alone.
 
+When the machine cannot keep up (more sensors than its cores compute), a
+device that is behind is handed the freshest scan ready that it has not sent
+yet, with that scan's own time (`__call__`): it skips revolutions, it never
+stalls on an old one nor sends a backlog. The jobs wait in the worker pool,
+most urgent first across sensors, and a job leaves out, as it is sent, the
+instants no device can send any more (`_bind`); a stream that loses
+instants that way is then foreseen every m-th scan (`_spacing`, m ≥ 1 and
+fractional: 1.5 is every other scan and every scan in turn), so what is
+computed is what goes out, and each sensor gets its share. Counters: `late`
+(scans handed out after a fresher one was due) and `skipped` (a stream's
+scans never handed out).
+
 A live change (the control API) alters the world from its instant on:
 `invalidate_from` drops every scan kept or foreseen at or after that instant
 and starts them again, so no scan computed ahead of a change is served after it.
@@ -16,6 +28,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import math
 from collections import OrderedDict, deque
 from concurrent.futures import Executor, Future
 from typing import Any, Callable, Protocol, Sequence
@@ -38,6 +51,11 @@ STRIDE_TOLERANCE_S = 1e-6
 # late enough not to compete for the CPU with the previous scan's delivery
 # (on a pty the kernel forwards bytes on a worker thread that a busy CPU delays).
 PREFETCH_LEAD_S = 0.07
+# A behind stream is foreseen every m-th scan, m at most this (a sensor then sends one scan in 32).
+MAX_SPACING = 32
+# A spaced stream's batch spans at most this many strides, so a spacing chosen once soon gives way to a newer one.
+MAX_BATCH_SPAN_STRIDES_PER_SCAN = 4  # × the batch size
+DEMAND_GRACE_S = 0.2  # a stream's demand lapses this long (wall) after two of its scans failed to come
 
 
 class ScanSource(Protocol):
@@ -53,6 +71,7 @@ SensorFactory = Callable[[SensorSpec], ScanSource]
 ScanObserver = Callable[[Scan], None]
 # defer(simulated seconds, fn): run fn on the loop's thread that much later (the daemon's timer)
 Defer = Callable[[float, Callable[[], None]], Any]
+Now = Callable[[], float]  # the daemon's simulated time (read from the worker pool's thread too)
 # A steady stream's next batch is foreseen as a device reads a scan, i.e. while that scan goes
 # out on the wire and its client reads it; it is started this many strides later, in the quiet
 # between two scans, so the worker computing it does not compete for a core with the delivery
@@ -77,10 +96,18 @@ class ScanCache:
         phase: int = 0,
         observer: ScanObserver | None = None,
         defer: Defer | None = None,
+        now: Now | None = None,
+        speed: Callable[[], float] | None = None,
     ) -> None:
         if size < 2 * batch:
             raise ValueError(f"a scan cache of {size} cannot hold two batches of {batch}")
         self.waits = 0  # requests that found their scan not yet computed
+        self.late = 0  # scans handed out after a fresher one was due (the device was behind)
+        self.skipped = 0  # a stream's scans never handed out (the device skipped them)
+        self.served = 0  # scans handed out (once per instant)
+        self.dropped = 0  # instants left out of jobs as a worker took them (nobody could send them by then)
+        self._now = now
+        self._clock_speed = speed
         self._sensor = sensor
         self._executor = executor
         self._size = size
@@ -93,38 +120,143 @@ class ScanCache:
         self._recent_times: dict[RequestKey, deque[float]] = {}
         self._predicted_until: dict[RequestKey, float] = {}
         self._strides: dict[RequestKey, float] = {}
+        self._told_strides: dict[RequestKey, float] = {}  # streams' periods their devices told (`expect`)
         self._observer = observer  # told of each scan handed to a device (once per instant): must return at once
         self._observed_tick: int | None = None
         # scans dropped by a live change whose old job is still under way (`invalidate_from`)
         self._outdated: dict[tuple, Future] = {}
         self._defer = defer
         self._deferred: dict[int, Callable[[], None]] = {}  # id(part future) → start its batch now
+        self._served_tick: dict[RequestKey, int] = {}  # per request: the newest instant handed out
+        self._bound_tick: dict[RequestKey, int] = {}  # per request: the newest instant a job was sent for
+        self._spacing: dict[RequestKey, float] = {}  # a stream foreseen every m-th scan (1: every scan)
 
     def __call__(self, time_s: float, **request: Any) -> Scan:
         """What a device calls: the scan for this request (computed now, alone, if not foreseen)."""
         self._last_request = request
-        future = self.request(time_s, **request)
-        self._start_now(future)  # a batch still waiting for its quiet moment: the caller needs it now
-        if not future.done():
-            self.waits += 1  # the caller's thread waits for a computation (a miss, or a late job)
+        shape, tick = _request_key(request), round(time_s * TICKS_PER_S)
+        future = self._futures.get(_cache_key(time_s, request))
+        fresher = None if _ready(future) or self._now is None else self._freshest_ready(shape, tick)
+        if fresher is not None:  # behind: the freshest scan not yet sent, with its own time (not the one asked)
+            self._follow_stream(time_s, request)
+            future = fresher
+        else:
+            future = self.request(time_s, **request)
+            if not _ready(future):
+                future = self._future(time_s, request)  # a dropped instant is started again
+                self._start_now(future)  # a batch still waiting for its quiet moment: the caller needs it now
+                self.waits += 1  # the caller's thread waits for a computation (a miss, or a late job)
         try:
             scan = future.result()
         except BaseException:
             self._forget(future)  # computed again if asked again (a restarted worker may succeed)
             raise
-        scan = scan if scan.time_s == time_s else dataclasses.replace(scan, time_s=time_s)
-        if self._observer is not None:
-            tick = round(time_s * TICKS_PER_S)
-            if tick != self._observed_tick:  # several endpoints of one sensor: tell once
-                self._observed_tick = tick
+        scan_tick = round(scan.time_s * TICKS_PER_S)
+        if scan_tick == tick and scan.time_s != time_s:
+            scan = dataclasses.replace(scan, time_s=time_s)
+        if scan_tick != self._observed_tick:  # several endpoints of one sensor: count and tell once
+            self._observed_tick = scan_tick
+            self._count_served(shape, scan_tick, late=scan_tick < tick)
+            if self._observer is not None:
                 self._observer(scan)
         return scan
 
-    def expect(self, request: dict[str, Any]) -> None:
+    def _count_served(self, shape: RequestKey, tick: int, *, late: bool) -> None:
+        previous = self._served_tick.get(shape)
+        self._served_tick[shape] = max(tick, previous if previous is not None else tick)
+        self.served += 1
+        self.late += late
+        stride = self._strides.get(shape)
+        if previous is not None and stride is not None and tick > previous:
+            self.skipped += max(0, round((tick - previous) / (stride * TICKS_PER_S)) - 1)
+
+    def _freshest_ready(self, shape: RequestKey, tick: int) -> Future | None:
+        """The newest computed scan of this request after the last one handed out and not after `tick`
+        (only a cache that knows the daemon's clock hands one out for a later one: a direct caller
+        always gets the scan it asked for)."""
+        served = self._served_tick.get(shape, -1)
+        ready = [(key[0], future) for key, future in self._futures.items()
+                 if key[1:] == shape and served < key[0] <= tick and _ready(future)]
+        return max(ready, key=lambda pair: pair[0])[1] if ready else None
+
+    def next_scan(self, time_s: float) -> tuple[Future | None, float | None]:
+        """What a device due to read the last request's scan at `time_s` must wait for before it is
+        polled, so that it never waits on the loop: (job, instant). No job: a scan is ready now, or
+        will be at `instant` (simulated s; sleep till then). A device that is behind waits for the
+        earliest scan under way that it has not sent (polled, it sends the freshest one ready);
+        between a spaced stream's scans it sleeps till the next one, unless a worker is free."""
+        request = self._last_request
+        if request is None:
+            return None, None
+        shape, tick = _request_key(request), round(time_s * TICKS_PER_S)
+        now = self._now() if self._now is not None else None
+        limit = tick if now is None else max(tick, round(now * TICKS_PER_S))  # a poll reads the newest due
+        served = self._served_tick.get(shape, -1)
+        held = sorted(((key[0], future) for key, future in self._futures.items()
+                       if key[1:] == shape and key[0] > served and not future.cancelled()), key=lambda pair: pair[0])
+        due = [(held_tick, future) for held_tick, future in held if held_tick <= limit]
+        if any(future.done() for _, future in due):
+            return None, None
+        if due:
+            self._start_now(due[0][1])
+            return due[0][1], None
+        outdated = self._outdated.get(_cache_key(time_s, request))
+        if outdated is not None and not outdated.done():
+            return outdated, None  # a live change dropped it: started again once its old job ends
+        if held and self._behind():  # a spaced stream's next scan: the revolutions between are skipped
+            later_tick, later = held[0]
+            self._start_now(later)
+            return (None if later.done() else later), later_tick / TICKS_PER_S
+        return self._future(self._current(time_s, shape), request, foreseen=True), None
+
+    def input_scan(self, time_s: float) -> Future | None:
+        """The job a request read at once (a GD, an LMS200 30 01) must wait for, if any: none when a
+        scan not yet sent is ready; else the scan at `time_s`, computed before every job waiting
+        (a command's reply, an LMS200's ACK with it, must not wait for a behind fleet's turn)."""
+        request = self._last_request
+        if request is None:
+            return None
+        key = _cache_key(time_s, request)
+        future = self._futures.get(key)
+        if _ready(future) or (self._now is not None and self._freshest_ready(key[1:], key[0]) is not None):
+            return None
+        if _held(future) and self._idle():  # under way, or waiting for its quiet moment
+            self._start_now(future)
+            return future
+        if _held(future):
+            future.cancel()  # its batch leaves it out; this job goes first
+        self._outdated.pop(key, None)
+        return self._submit_one(time_s, request, key, urgency=-math.inf)
+
+    def _current(self, time_s: float, shape: RequestKey) -> float:
+        """The stream's newest instant due by now at or after `time_s` (a behind device's next scan)."""
+        stride, now = self._strides.get(shape), self._now() if self._now is not None else None
+        if stride is None or now is None or now < time_s + stride:
+            return time_s
+        return time_s + ((now - time_s) // stride) * stride
+
+    def _behind(self) -> bool:
+        """Whether the workers cannot compute every scan of every stream (streams are spaced): a
+        revolution between a spaced stream's scans is then skipped, not computed alone."""
+        return getattr(self._executor, "spacing", 1.0) > 1.0
+
+    def _idle(self) -> bool:
+        """Whether a scan asked for now is computed at once (a free worker, nothing waiting)."""
+        return getattr(self._executor, "idle", True)
+
+    def expect(self, request: dict[str, Any], stride_s: float | None = None) -> None:
         """The request a device will make, told before its first one: that first scan is then
-        foreseen (`prefetch`, `pending`) like every later one, instead of making its caller wait."""
+        foreseen (`prefetch`, `pending`) like every later one, instead of making its caller wait.
+        `stride_s`: its stream's period, if it streams and can say: the stream is then batched from
+        its first scans, even when a busy machine makes it skip some."""
         if self._last_request is None:
             self._last_request = dict(request)
+        shape = _request_key(request)
+        if stride_s is None:
+            if self._told_strides.pop(shape, None) is not None and hasattr(self._executor, "demand"):
+                self._executor.demand((id(self), shape), 0.0, 0.0)  # the stream stopped: its demand with it
+        else:
+            self._told_strides[shape] = stride_s
 
     def request(self, time_s: float, **request: Any) -> Future:
         """The scan for this request as a future (for readers that must not block, like the control API);
@@ -147,6 +279,8 @@ class ScanCache:
         job per scan under way instead of queueing one per change. The later scans are computed
         when foreseen again; the stream's batching resumes from the earliest."""
         first_tick = round(time_s * TICKS_PER_S)
+        for shape, bound in self._bound_tick.items():
+            self._bound_tick[shape] = min(bound, first_tick - 1)  # what was sent from then on counts no more
         earliest: dict[tuple, tuple] = {}
         for key in [key for key in self._futures if key[0] >= first_tick]:
             job = self._futures.pop(key)
@@ -195,7 +329,8 @@ class ScanCache:
             if not outdated.done():
                 return outdated  # wait for it to end, then ask again
             return self._future(time_s, self._last_request)
-        return self._futures.get(key)
+        future = self._futures.get(key)
+        return None if future is None or future.cancelled() else future
 
     def __len__(self) -> int:
         """How many scans (done or under way) the cache holds: at most its size."""
@@ -212,21 +347,80 @@ class ScanCache:
             return  # started again once its outdated job ends (`pending`)
         shape = _request_key(request)
         until, stride = self._predicted_until.get(shape), self._strides.get(shape)
-        if until is not None and stride is not None and abs(time_s - (until + stride)) <= STRIDE_TOLERANCE_S:
+        step = None if stride is None else stride * math.ceil(self._spacing.get(shape, 1.0))
+        if until is not None and step is not None and until < time_s <= until + step + STRIDE_TOLERANCE_S:
             self._predict(shape, until, stride, request)
+        elif stride is not None and self._behind() and not _held(
+            self._futures.get(_cache_key(time_s, request))
+        ):
+            return  # behind: a stream's scans come from its batches (and `next_scan`), not one by one
         else:
-            self._future(time_s, request)
+            self._future(time_s, request, foreseen=True)
 
-    def _future(self, time_s: float, request: dict[str, Any]) -> Future:
+    def _future(self, time_s: float, request: dict[str, Any], *, foreseen: bool = False) -> Future:
+        """The scan's future, started if need be; a `foreseen` one is dropped if, once a worker is
+        free for it, its device can no longer send it (one asked for is always computed)."""
         key = _cache_key(time_s, request)
         future = self._futures.get(key)
-        if future is None:
+        if future is None or future.cancelled():
             self._outdated.pop(key, None)
-            future = self._executor.submit(self._sensor.scan, time_s, **request)
-            self._store(key, future)
+            future = self._submit_one(time_s, request, key, foreseen=foreseen)
         else:
             self._futures.move_to_end(key)
         return future
+
+    def _submit_one(
+        self, time_s: float, request: dict[str, Any], key: tuple, urgency: float | None = None, *, foreseen: bool = False
+    ) -> Future:
+        """One scan, computed alone (held in the cache under `key` before a worker may take it);
+        queued by its instant, or by `urgency`."""
+        schedule = getattr(self._executor, "schedule", None)
+        if schedule is None:
+            future = self._executor.submit(self._sensor.scan, time_s, **request)
+            self._store(key, future)
+            return future
+        part: Future = Future()
+        self._store(key, part)
+
+        def prepare() -> tuple | None:
+            bound = self._bind(key[1:], [(time_s, key, part)], foreseen=foreseen)
+            return (bound[0][0],) if bound else None
+
+        job = schedule(self._sensor.scan, time_s if urgency is None else urgency, prepare, request)
+        job.add_done_callback(lambda done: _settle_one(done, part))
+        return part
+
+    def _bind(
+        self, shape: RequestKey, entries: list[tuple[float, tuple, Future]], *, foreseen: bool
+    ) -> list[tuple[float, Future]]:
+        """The instants a job computes, chosen as a worker takes it (on the pool's thread): of
+        `entries` (time, cache key, future), those still held; of a `foreseen` job, not those its
+        device already passed, and of those already due only the newest, moved on to the stream's
+        current revolution if a later one has completed meanwhile (a device sends the freshest
+        scan; computing an older one would be wasted), unless a job already sent computes that one
+        or a later. The futures left out are cancelled (whoever waits for one looks again)."""
+        kept = [(time_s, key, part) for time_s, key, part in entries if self._futures.get(key) is part and not part.done()]
+        now = self._now() if self._now is not None else None
+        rebound = False
+        if foreseen and kept:
+            served = self._served_tick.get(shape, -1)
+            kept = [entry for entry in kept if entry[1][0] > served]
+            stride = self._strides.get(shape)
+            if now is not None:
+                due = [entry for entry in kept if entry[0] <= now]
+                kept = [entry for entry in kept if entry[0] > now]
+                if due:
+                    time_s, key, part = due[-1]
+                    if stride is not None and time_s + stride <= now:
+                        time_s, rebound = time_s + math.floor((now - time_s) / stride + 1e-9) * stride, True
+                    if not rebound or round(time_s * TICKS_PER_S) > self._bound_tick.get(shape, -1):
+                        kept.insert(0, (time_s, key, part))
+            if kept:
+                self._bound_tick[shape] = max(self._bound_tick.get(shape, -1), round(kept[-1][0] * TICKS_PER_S))
+        for _, _, part in entries:
+            if all(part is not kept_part for _, _, kept_part in kept):
+                self.dropped += part.cancel()
+        return [(time_s, part) for time_s, _, part in kept]
 
     def _forget(self, future: Future) -> None:
         for key in [key for key, stored in self._futures.items() if stored is future]:
@@ -238,41 +432,80 @@ class ScanCache:
             self._futures.popitem(last=False)
 
     def _follow_stream(self, time_s: float, request: dict[str, Any]) -> None:
-        """Batch the stream's next scans once its last two strides agree and at most
-        one foreseen scan is left: the batch is then one stride ahead of its first use."""
+        """Batch the stream's next scans once its last two strides agree (a device that is behind
+        then asks at whole multiples of it) and at most one foreseen scan is left: the batch is
+        then one stride ahead of its first use."""
         shape = _request_key(request)
         times = self._recent_times.setdefault(shape, deque(maxlen=3))
         if times and round(times[-1] * TICKS_PER_S) == round(time_s * TICKS_PER_S):
             return  # another endpoint asking for the same scan
         times.append(time_s)
-        strides = [later - earlier for earlier, later in zip(times, list(times)[1:])]
-        if len(strides) < 2 or strides[-1] <= 0 or abs(strides[-1] - strides[-2]) > STRIDE_TOLERANCE_S:
+        stride = self._strides.get(shape)
+        gap = times[-1] - times[-2] if len(times) > 1 else None
+        told = self._told_strides.get(shape)
+        if told is not None:
+            if gap is not None and not (gap > 0 and _multiple(gap, told)):
+                return  # a request off the stream's grid (a GD between its scans): the stream goes on
+            stride = self._strides[shape] = told
+        elif stride is not None and gap is not None and gap > 0 and _multiple(gap, stride):
+            pass  # the same stream, maybe skipping scans
+        elif len(times) == 3 and gap is not None and gap > 0 and abs(gap - (times[1] - times[0])) <= STRIDE_TOLERANCE_S:
+            stride = self._strides[shape] = gap
+        else:
             self._predicted_until.pop(shape, None)
             self._strides.pop(shape, None)
+            self._spacing.pop(shape, None)
             return
-        stride = self._strides[shape] = strides[-1]
+        assert stride is not None
+        previous = self._spacing.get(shape, 1.0)
+        spacing = self._adjust_spacing(shape, stride)
+        if previous > 1.0 >= spacing:  # caught up: every scan again from now on (those foreseen are kept)
+            self._predict(shape, time_s, stride, request)
+            return
+        # behind, the next batch is foreseen two scans ahead: it waits its turn among the other sensors'
+        lead = stride * spacing * (1 if spacing <= 1.0 else 2)
         until = self._predicted_until.get(shape)
-        if until is not None and until - time_s > stride + STRIDE_TOLERANCE_S:
+        if until is not None and until - time_s > lead + STRIDE_TOLERANCE_S:
             return  # enough foreseen
         if until is not None and until > time_s - STRIDE_TOLERANCE_S:
             self._predict(shape, until, stride, request)
-        else:  # a new stream: its first batch is short by the phase
+        elif self._spacing.get(shape, 1.0) <= 1.0:  # a new stream: its first batch is short by the phase
             self._predict(shape, time_s, stride, request, count=self._batch - self._phase)
+        else:
+            self._predict(shape, time_s, stride, request)
+
+    def _adjust_spacing(self, shape: RequestKey, stride: float) -> float:
+        """Every how many scans the stream is foreseen: what the workers can keep up with, the same
+        for every stream (1 with a thread, or while they keep up). The stream states its demand."""
+        demand = getattr(self._executor, "demand", None)
+        if demand is not None:  # stated again at the stream's next scan, or it lapses (its client left)
+            spacing = self._spacing.get(shape, 1.0)
+            demand((id(self), shape), self._speed() / stride, 2.0 * spacing * stride / self._speed() + DEMAND_GRACE_S)
+        spacing = self._spacing[shape] = min(MAX_SPACING, getattr(self._executor, "spacing", 1.0))
+        return spacing
+
+    def _speed(self) -> float:
+        """Simulated seconds per wall second."""
+        return self._clock_speed() if self._clock_speed is not None else 1.0
 
     def _predict(
         self, shape: RequestKey, after_s: float, stride: float, request: dict[str, Any], count: int | None = None
     ) -> None:
-        """Foresee the stream's next `count` (default SCAN_BATCH) scans after `after_s`, in one job,
-        started in the quiet half a stride later (`BATCH_START_DELAY_STRIDES`) when the cache can defer."""
-        predicted = [after_s + j * stride for j in range(1, (count or self._batch) + 1)]
+        """Foresee the stream's next `count` scans after `after_s` (default SCAN_BATCH, every m-th scan of
+        a spaced stream: as many as span SCAN_BATCH strides), in one job, started in the quiet half a
+        stride later (`BATCH_START_DELAY_STRIDES`) when the cache can defer."""
+        spacing = self._spacing.get(shape, 1.0)
+        count = count or max(1, min(self._batch, math.floor(MAX_BATCH_SPAN_STRIDES_PER_SCAN * self._batch / spacing)))
+        predicted = [after_s + round(j * spacing) * stride for j in range(1, count + 1)]  # on the revolutions' grid
         self._predicted_until[shape] = predicted[-1]
         self._submit_batch(predicted, request, delay_s=BATCH_START_DELAY_STRIDES * stride)
 
     def _submit_batch(self, times_s: list[float], request: dict[str, Any], delay_s: float = 0.0) -> None:
         """One `sensor.scans` job for the times not already foreseen; a future per time, held
         at once (so `pending` finds them), the job itself started now or `delay_s` later."""
+        shape = _request_key(request)
         wanted = [(time_s, _cache_key(time_s, request)) for time_s in times_s]
-        wanted = [(time_s, key) for time_s, key in wanted if key not in self._futures]
+        wanted = [(time_s, key) for time_s, key in wanted if not _held(self._futures.get(key))]
         if not wanted:
             return
         parts: list[Future] = []
@@ -291,8 +524,21 @@ class ScanCache:
                     part.cancel()  # dropped meanwhile (a live change): nobody waits for it
             if not held:
                 return
-            job = self._executor.submit(self._sensor.scans, [time_s for time_s, _ in held], **request)
-            job.add_done_callback(lambda done: _settle(done, [part for _, part in held]))
+            schedule = getattr(self._executor, "schedule", None)
+            if schedule is None:
+                job = self._executor.submit(self._sensor.scans, [time_s for time_s, _ in held], **request)
+                job.add_done_callback(lambda done: _settle(done, [part for _, part in held]))
+                return
+            sent: list[Future] = []
+
+            def prepare() -> tuple | None:
+                """At the moment a worker takes the job: the instants it computes (on the pool's thread)."""
+                bound = self._bind(shape, [(time_s, key, part) for (time_s, key), part in zip(wanted, parts)], foreseen=True)
+                sent.extend(part for _, part in bound)
+                return ([time_s for time_s, _ in bound],) if bound else None
+
+            job = schedule(self._sensor.scans, held[0][0], prepare, request)
+            job.add_done_callback(lambda done: _settle(done, sent))
 
         for part in parts:
             self._deferred[id(part)] = start
@@ -318,12 +564,39 @@ def _cache_key(time_s: float, request: dict[str, Any]) -> tuple:
 
 def _settle(job: Future, parts: list[Future]) -> None:
     """Hand each of a batch job's scans (or its failure) to the future of its time."""
-    if job.cancelled():
-        for part in parts:
+    for index, part in enumerate(parts):
+        if part.done():
+            continue  # dropped meanwhile (cancelled): nobody waits for it
+        if job.cancelled():
             part.cancel()
-    elif job.exception() is not None:
-        for part in parts:
+        elif job.exception() is not None:
             part.set_exception(job.exception())
+        else:
+            part.set_result(job.result()[index])
+
+
+def _settle_one(job: Future, part: Future) -> None:
+    if part.done():
+        return
+    if job.cancelled():
+        part.cancel()
+    elif job.exception() is not None:
+        part.set_exception(job.exception())
     else:
-        for part, scan in zip(parts, job.result()):
-            part.set_result(scan)
+        part.set_result(job.result())
+
+
+def _ready(future: Future | None) -> bool:
+    """A computed scan (not a failure, not dropped)."""
+    return future is not None and future.done() and not future.cancelled() and future.exception() is None
+
+
+def _held(future: Future | None) -> bool:
+    """A scan computed or under way (not dropped)."""
+    return future is not None and not future.cancelled()
+
+
+def _multiple(gap: float, stride: float) -> bool:
+    """Whether `gap` is a whole number of `stride`s (each µs-rounded)."""
+    count = round(gap / stride)
+    return count >= 1 and abs(gap - count * stride) <= count * STRIDE_TOLERANCE_S

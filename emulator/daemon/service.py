@@ -73,6 +73,7 @@ DEVICE_OPTIONS: dict[str, tuple[str, ...]] = {
 _COLA_UNITS: weakref.WeakKeyDictionary[Any, ColaUnit] = weakref.WeakKeyDictionary()
 
 
+OVERLOAD_CHECK_S = 1.0  # how often (wall) the daemon looks whether its sensors fell behind or caught up
 MAX_HELD_INPUT_BYTES = 65536  # client input waiting for a scan; beyond, it is discarded (counted)
 RETRY_AFTER_FAILURE_S = 0.1  # a device whose scan failed is polled again this much later (wall)
 
@@ -181,7 +182,9 @@ class DeviceSession:
         prefetch: Callable[[float], None] | None = None,
         call_later: Callable[..., Cancellable] | None = None,
         pending: Callable[[float], Future | None] | None = None,
-        expect: Callable[[dict], None] | None = None,
+        expect: Callable[[dict, float | None], None] | None = None,
+        next_scan: Callable[[float], tuple[Future | None, float | None]] | None = None,
+        input_scan: Callable[[float], Future | None] | None = None,
     ) -> None:
         self.device = device
         self.endpoint: PtyEndpoint | TcpEndpoint | None = None
@@ -190,6 +193,8 @@ class DeviceSession:
         self._prefetch = prefetch
         self._pending = pending
         self._expect = expect
+        self._next_scan = next_scan
+        self._input_scan = input_scan
         self._call_later = call_later or loop.call_later
         self._timer: Cancellable | None = None
         self._prefetch_timer: Cancellable | None = None
@@ -222,6 +227,8 @@ class DeviceSession:
         if time_s is None:
             return None
         self._tell_request()
+        if self._input_scan is not None:
+            return self._input_scan(time_s)
         self._prefetch(time_s)
         return self._pending(time_s)
 
@@ -234,6 +241,7 @@ class DeviceSession:
     def disconnected(self) -> None:
         self._held = None
         self.device.connection_lost()
+        self._tell_request()  # its stream stopped: the scan cache stops counting on it
         self._schedule()
 
     @property
@@ -257,8 +265,10 @@ class DeviceSession:
     def _wake(self) -> None:
         self._timer = None
         deadline = self.device.next_deadline()
-        job = None
-        if self._pending is not None and deadline is not None:
+        job = at = None
+        if self._next_scan is not None and deadline is not None:
+            job, at = self._next_scan(self._scan_time(deadline))
+        elif self._pending is not None and deadline is not None:
             scan_time = self._scan_time(deadline)
             job = self._pending(scan_time)
             if job is None and self._prefetch is not None:
@@ -268,7 +278,11 @@ class DeviceSession:
             waiting = self._timer = _WaitingForScan()
             job.add_done_callback(lambda _: self._loop.call_soon_threadsafe(self._resume, waiting))
             return
-        self._poll()
+        if at is not None and (delay := self._clock.wall_delay(at - self._clock.now())) > 0:
+            if delay != float("inf"):  # behind: the next scan computed is a later revolution's
+                self._timer = self._call_later(delay, self._wake)
+            return
+        self._poll(at)
 
     def _resume(self, waiting: _WaitingForScan) -> None:
         """The scan the device waited for is ready (unless the wait was called off meanwhile);
@@ -277,11 +291,12 @@ class DeviceSession:
             self._timer = None
             self._wake()
 
-    def _poll(self) -> None:
-        """Let the device send what is due; a scan that failed (its worker died twice) is
+    def _poll(self, at: float | None = None) -> None:
+        """Let the device send what is due (by `at` at the earliest: a timer may wake a hair before the
+        instant it was set for); a scan that failed (its worker died twice) is
         reported on stderr and the device tried again a moment later, never left asleep."""
         try:
-            outputs = self.device.poll(self._clock.now())
+            outputs = self.device.poll(max(self._clock.now(), at if at is not None else -math.inf))
         except ScanJobFailed as error:
             print(f"scan failed: {type(error).__name__}: {error}; retrying in {RETRY_AFTER_FAILURE_S:g} s",
                   file=sys.stderr, flush=True)
@@ -299,8 +314,9 @@ class DeviceSession:
         """Tell the scan cache what the device will ask for, if it can say (`scan_request`), so even
         its first scan is computed ahead and waited for without blocking the loop."""
         scan_request = getattr(self.device, "scan_request", None)
+        scan_stride = getattr(self.device, "scan_stride_s", None)
         if self._expect is not None and scan_request is not None:
-            self._expect(scan_request())
+            self._expect(scan_request(), scan_stride() if scan_stride is not None else None)
 
     def _schedule(self) -> None:
         self.stop()
@@ -322,6 +338,10 @@ class DeviceSession:
         next_scan_time = getattr(self.device, "next_scan_time", None)
         scan_time = next_scan_time() if next_scan_time is not None else None
         return deadline if scan_time is None else scan_time
+
+
+def _names(names: list[str], shown: int = 5) -> str:
+    return ", ".join(names[:shown]) + (f", … {len(names) - shown} more" if len(names) > shown else "")
 
 
 def _served(scene: Scene, sensors: Sequence[str] | None) -> Scene:
@@ -346,7 +366,8 @@ class Daemon:
     (at most one per sensor); `sensors` serves only those of the scene (a fleet).
     `live` holds the live changes applied (`apply`); None for a supplied scan source.
     `on_scan` is told of every scan handed to a device (on the loop thread: it must
-    return at once, e.g. by queueing the scan for a recorder's own thread)."""
+    return at once, e.g. by queueing the scan for a recorder's own thread).
+    `report(line)` prints the line said when sensors fall behind and when they catch up (stderr)."""
 
     def __init__(
         self,
@@ -361,6 +382,7 @@ class Daemon:
         sensors: Sequence[str] | None = None,
         on_scan: ScanObserver | None = None,
         idle_timeout_s: float = IDLE_TIMEOUT_S,
+        report: Callable[[str], None] = lambda line: print(line, file=sys.stderr, flush=True),
     ) -> None:
         self.scene = scene
         self.idle_timeout_s = idle_timeout_s
@@ -370,6 +392,7 @@ class Daemon:
         self._on_scan = on_scan
         self._plan = _only(plan_endpoints(_served(scene, sensors), endpoints_override), sensors)
         self._overridden = frozenset(endpoints_override or ())
+        self._served_names = frozenset(spec.name for spec, _ in self._plan)
         self._sensor_factory = sensor_factory
         self._device_factory = device_factory
         self._scan_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="scan")
@@ -389,6 +412,10 @@ class Daemon:
         self._endpoint_sensors: list[tuple[str, PtyEndpoint | TcpEndpoint]] = []
         self._timer: PreciseTimer | None = None
         self._stopped = asyncio.Event()  # set by stop(), even before run() has begun
+        self._report = report
+        self._behind_since: float | None = None  # wall time the sensors fell behind (None: on time)
+        self._missed_then: dict[str, int] = {}  # late + skipped per sensor at the last check
+        self._missed_at_behind = 0
 
     def start(
         self, loop: asyncio.AbstractEventLoop, on_ready: Callable[[Ready], None], refused: Sequence[str] = ()
@@ -405,13 +432,13 @@ class Daemon:
         for ordinal, (spec, addresses) in enumerate(self._plan):
             scans = self.scan_caches[spec.name] = ScanCache(
                 factory(spec), executor, batch=stream_batch(spec) or SCAN_BATCH, phase=ordinal, observer=self._on_scan,
-                defer=self._defer,
+                defer=self._defer, now=self.clock.now, speed=lambda: self.clock.speed,
             )
             for position, address in enumerate(addresses):
                 device = self._device_factory(spec, scans, phase_ms=self._phase_ms(spec))
                 session = DeviceSession(
                     device, self.clock, loop, scans.prefetch, self._timer.call_later, pending=scans.pending,
-                    expect=scans.expect,
+                    expect=scans.expect, next_scan=scans.next_scan, input_scan=scans.input_scan,
                 )
                 try:
                     readies.append(self._open(spec, address, session, loop))
@@ -428,8 +455,45 @@ class Daemon:
                     self.scan_caches[spec.name] = ScanCache(factory(spec), executor)
         for session in self.sessions:
             session.start()
+        self._timer.call_later(OVERLOAD_CHECK_S, self._check_overload)
         for ready in readies:
             on_ready(ready)
+
+    def sensor_counters(self) -> dict[str, dict[str, int]]:
+        """Per sensor served: scans handed out, those sent after a fresher one was due (`late`: the
+        daemon was behind) and a stream's scans never sent (`skipped`)."""
+        return {
+            name: {"served": cache.served, "late": cache.late, "skipped": cache.skipped}
+            for name, cache in self.scan_caches.items()
+            if name in self._served_names
+        }
+
+    def _check_overload(self) -> None:
+        """Once a second: one line when sensors start skipping or sending late scans, one when a
+        whole second passed without any again."""
+        if self._timer is None:
+            return
+        self._timer.call_later(OVERLOAD_CHECK_S, self._check_overload)
+        missed = {name: counts["late"] + counts["skipped"] for name, counts in self.sensor_counters().items()}
+        behind = sorted(name for name, count in missed.items() if count > self._missed_then.get(name, 0))
+        self._missed_then = missed
+        now = self._loop_time()
+        if behind and self._behind_since is None:
+            self._behind_since, self._missed_at_behind = now, sum(missed.values())
+            self._report(
+                f"behind: {len(behind)} of {len(missed)} sensors ({_names(behind)}) skipped or sent late scans;"
+                " the workers cannot compute every scan in time, each sensor sends its freshest scan"
+            )
+        elif not behind and self._behind_since is not None:
+            self._report(
+                f"caught up: every sensor on time again after {now - self._behind_since - OVERLOAD_CHECK_S:.1f} s behind"
+                f" ({sum(missed.values()) - self._missed_at_behind} more scans skipped or late meanwhile)"
+            )
+            self._behind_since = None
+
+    @staticmethod
+    def _loop_time() -> float:
+        return asyncio.get_running_loop().time()
 
     def _scan_sources(self) -> tuple[SensorFactory, Executor]:
         """Where scans are computed: in worker processes (sensors dealt out in turn), else
@@ -438,9 +502,7 @@ class Daemon:
             return self._sensor_factory or simulated_sensors(self.scene, self.world), self._scan_thread
         names = [spec.name for spec, _ in self._plan]
         count = min(self._workers, len(names)) or 1
-        self.pool = WorkerPool(
-            self.scene, [tuple(names[index::count]) for index in range(count)], nice=self._worker_nice
-        )
+        self.pool = WorkerPool(self.scene, names, count, nice=self._worker_nice)
         self.pool.start()
         if self._before_workers:  # changes applied before the workers existed (serve --events-in)
             self.pool.apply([event_record(event) for event in self._before_workers])
@@ -557,6 +619,10 @@ class Daemon:
             "dropped": sum(link.outbox.dropped for link in links),
             "timers": sum(session.waiting for session in self.sessions),
             "scan_waits": sum(cache.waits for cache in self.scan_caches.values()),
+            "late": sum(cache.late for cache in self.scan_caches.values()),
+            "skipped": sum(cache.skipped for cache in self.scan_caches.values()),
+            "jobs_waiting": self.pool.waiting if self.pool is not None else 0,
+            "instants_dropped": sum(cache.dropped for cache in self.scan_caches.values()),
             "tasks": len(asyncio.all_tasks()),
             "fds": len(os.listdir("/proc/self/fd")),
             "wakes": timer.wakes if timer is not None else 0,

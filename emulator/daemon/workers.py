@@ -1,9 +1,16 @@
 """Scans computed in worker processes, so a daemon uses every core and its loop never computes.
 
-Each worker process builds its own optics world from the scene and holds the
-sensors assigned to it; the daemon's scan caches hand it jobs through a
-`WorkerExecutor` (a `concurrent.futures` executor whose `submit` takes a
-`RemoteSensor`'s `scan` or `scans`) and get `Scan`s back, pickled over a pipe.
+Each worker process builds its own optics world from the scene and holds
+every sensor served; the daemon's scan caches hand jobs to the pool (through a
+`WorkerExecutor`, a `concurrent.futures` executor whose `submit` takes a
+`RemoteSensor`'s `scan` or `scans`, or `WorkerPool.schedule`) and get `Scan`s
+back, pickled over a pipe.
+
+Jobs wait in the pool, not in the workers' pipes: a worker holds one scan job
+at a time, and when it is free it takes the most urgent job waiting (earliest
+simulated instant first, across sensors). A scheduled job is prepared only as
+it is sent, so it leaves out the instants no device can still send by then
+(a machine that cannot keep up computes only scans that will go out).
 
 The protocol on the pipe, parent → worker: `("scan", job, sensor, time_s, request)`,
 `("scans", job, sensor, times_s, request)`, `("apply", job, events)` (world changes,
@@ -27,12 +34,14 @@ import multiprocessing.connection
 import os
 import sys
 import threading
+import time
 import types
 from concurrent.futures import Executor, Future
 from dataclasses import dataclass, field
 from multiprocessing.reduction import ForkingPickler
 from typing import Any, Callable, Iterator, Sequence
 
+from emulator.daemon.scheduler import Prepare, Scheduler
 from emulator.scene.live import event_from_record
 from emulator.scene.model import Scene
 from emulator.sensors.scan import Scan
@@ -156,11 +165,12 @@ class _Job:
     message: tuple
     future: Future
     attempts: int = 0
+    sent_at: float = 0.0  # monotonic time it was sent to its worker
 
 
 @dataclass
 class _Worker:
-    """One worker process and the jobs it holds."""
+    """One worker process and the jobs it holds (at most one scan job, and world changes)."""
 
     index: int
     sensor_names: tuple[str, ...]
@@ -169,16 +179,22 @@ class _Worker:
     jobs: dict[int, _Job] = field(default_factory=dict)
     lives: int = 0
 
+    @property
+    def computing(self) -> bool:
+        return any(job.message[0] != "apply" for job in self.jobs.values())
+
 
 class WorkerPool:
-    """Worker processes, each holding some of `scene`'s sensors (`assignment`: one tuple of
-    sensor names per worker). `start()` returns once every world is built.
+    """`count` worker processes, each holding every one of `sensor_names` of `scene`; scan
+    jobs wait here and go to whichever worker is free, the most urgent first.
+    `start()` returns once every world is built.
     `on_restart(line)` reports a restarted worker (the daemon prints it on stderr)."""
 
     def __init__(
         self,
         scene: Scene,
-        assignment: Sequence[Sequence[str]],
+        sensor_names: Sequence[str],
+        count: int = 1,
         *,
         on_restart: Callable[[str], None] = lambda line: print(line, file=sys.stderr, flush=True),
         nice: int = WORKER_NICE,
@@ -188,8 +204,9 @@ class WorkerPool:
         self.scene = scene
         self.nice = nice
         self._context = multiprocessing.get_context("spawn")
-        self._workers = [_Worker(index, tuple(names)) for index, names in enumerate(assignment) if names]
-        self._worker_of = {name: worker for worker in self._workers for name in worker.sensor_names}
+        self._sensor_names = tuple(sensor_names)
+        self._workers = [_Worker(index, self._sensor_names) for index in range(max(1, count))]
+        self._scheduler = Scheduler(len(self._workers))
         self._events: list[dict] = []  # every event applied so far: a restarted worker replays them
         self._job_ids = itertools.count()
         self._lock = threading.Lock()
@@ -207,7 +224,7 @@ class WorkerPool:
             self._await_ready(worker)
 
     def sensor(self, name: str) -> RemoteSensor:
-        if name not in self._worker_of:
+        if name not in self._sensor_names:
             raise KeyError(f"no worker holds sensor {name!r}")
         return RemoteSensor(name)
 
@@ -215,16 +232,54 @@ class WorkerPool:
         return WorkerExecutor(self)
 
     def submit(self, sensor: str, method: str, *args: Any) -> Future:
-        """Run `method` ("scan" or "scans") of `sensor` with `args` in its worker."""
-        worker = self._worker_of[sensor]
-        future: Future = Future()
+        """Run `method` ("scan" or "scans") of `sensor` with `args` in a worker; its urgency is its
+        (earliest) instant, `args[0]`."""
+        first = args[0] if method == "scan" else min(args[0], default=0.0)
+        message = (method, sensor, *args)
+        return self.schedule(first, lambda: message)
+
+    def schedule(self, urgency: float, prepare: Prepare) -> Future:
+        """Queue a scan job: when a worker is free and no job waiting is more urgent (a smaller
+        `urgency`, simulated seconds), `prepare()` makes its message (None: drop the job, its
+        future cancelled) and the worker computes it. The future holds its result."""
         with self._lock:
             if self._closed:
                 raise RuntimeError("the worker pool is closed")
-            job = next(self._job_ids)
-            worker.jobs[job] = _Job((method, job, sensor, *args), future)
-            self._send(worker, job)
+            future = self._scheduler.push(urgency, prepare)
+            self._dispatch()
         return future
+
+    @property
+    def idle(self) -> bool:
+        """A worker is free and no job waits: a scan asked for now is computed at once."""
+        with self._lock:
+            return not len(self._scheduler) and any(not worker.computing for worker in self._workers)
+
+    def demand(self, stream: Any, per_second: float, valid_s: float) -> None:
+        """A stream wants `per_second` instants each wall second (`Scheduler.demand`)."""
+        with self._lock:
+            self._scheduler.demand(stream, per_second, valid_s)
+
+    @property
+    def spacing(self) -> float:
+        """Every how many scans each stream is computed so that the workers keep up (`Scheduler.spacing`)."""
+        with self._lock:
+            return self._scheduler.spacing
+
+    @property
+    def waiting(self) -> int:
+        """Scan jobs waiting for a free worker."""
+        return len(self._scheduler)
+
+    def _dispatch(self) -> None:
+        """Hand the most urgent waiting jobs to the free workers (lock held)."""
+        free = [worker for worker in self._workers if not worker.computing and worker.connection is not None]
+        while free and (taken := self._scheduler.take()) is not None:
+            message, future = taken
+            worker = free.pop()
+            job = next(self._job_ids)
+            worker.jobs[job] = _Job((message[0], job, *message[1:]), future, sent_at=time.monotonic())
+            self._send(worker, job)
 
     def apply(self, events: Sequence[dict]) -> list[Future]:
         """Send world-change events to every worker; one future per worker (the count applied)."""
@@ -249,6 +304,8 @@ class WorkerPool:
                     worker.connection.send(("stop",))
                 except OSError:
                     pass
+        with self._lock:
+            self._scheduler.cancel_all()
         for worker in workers:
             if worker.process is not None:
                 worker.process.join(timeout=2.0)
@@ -310,6 +367,10 @@ class WorkerPool:
                 break
             with self._lock:
                 job = worker.jobs.pop(job_id, None)
+                if job is not None and kind == "done" and job.message[0] in ("scan", "scans"):
+                    instants = 1 if job.message[0] == "scan" else len(job.message[3])
+                    self._scheduler.computed(instants, time.monotonic() - job.sent_at)
+                self._dispatch()  # this worker may be free: its next job goes out before this one is settled
             if job is None or job.future.cancelled():
                 continue
             if kind == "done":
@@ -360,6 +421,7 @@ class WorkerPool:
             for job_id in list(worker.jobs):
                 if worker.jobs[job_id].message[0] != "apply":
                     self._send(worker, job_id)
+            self._dispatch()
 
 
 def _settle_like(done: Future, futures: list[Future]) -> None:
@@ -375,6 +437,13 @@ def _settle_like(done: Future, futures: list[Future]) -> None:
             future.set_result(done.result())
 
 
+def _remote(fn: Callable[..., Any]) -> RemoteSensor:
+    sensor = getattr(fn, "__self__", None)
+    if not isinstance(sensor, RemoteSensor) or fn.__name__ not in ("scan", "scans"):
+        raise TypeError(f"a WorkerExecutor runs RemoteSensor.scan/scans, not {fn!r}")
+    return sensor
+
+
 class WorkerExecutor(Executor):
     """An executor whose jobs are a `RemoteSensor`'s `scan` or `scans`, run in its worker."""
 
@@ -382,10 +451,33 @@ class WorkerExecutor(Executor):
         self._pool = pool
 
     def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future:
-        sensor = getattr(fn, "__self__", None)
-        if not isinstance(sensor, RemoteSensor) or fn.__name__ not in ("scan", "scans"):
-            raise TypeError(f"a WorkerExecutor runs RemoteSensor.scan/scans, not {fn!r}")
+        sensor = _remote(fn)
         return self._pool.submit(sensor.name, fn.__name__, *args, kwargs)
+
+    def schedule(
+        self, fn: Callable[..., Any], urgency: float, prepare_args: Callable[[], tuple | None], request: dict
+    ) -> Future:
+        """`fn(*prepare_args(), **request)` in a worker, queued by `urgency` (its earliest instant):
+        the arguments are made as a worker takes the job (None: nothing is still wanted, the job is
+        dropped and its future cancelled)."""
+        sensor = _remote(fn)
+
+        def prepare() -> tuple | None:
+            args = prepare_args()
+            return None if args is None else (fn.__name__, sensor.name, *args, request)
+
+        return self._pool.schedule(urgency, prepare)
+
+    @property
+    def idle(self) -> bool:
+        return self._pool.idle
+
+    @property
+    def spacing(self) -> float:
+        return self._pool.spacing
+
+    def demand(self, stream: Any, per_second: float, valid_s: float) -> None:
+        self._pool.demand(stream, per_second, valid_s)
 
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
         """The pool is the daemon's to close."""

@@ -242,6 +242,19 @@ class Lms200Device:
             "unit": self._config.units, "field_bits": self._measuring.field_bits,
         }
 
+    def scan_stride_s(self) -> float | None:
+        """The period of the continuous mode running, in whole scans of the current variant (None: none
+        runs, partial scans, each asked for differently, or a line too slow for every scan), so a daemon
+        can batch it from its first scans."""
+        stream = self._stream
+        if stream is None or self._mode is Mode.STREAM_PARTIAL:
+            return None
+        stride = completion_time(1, stream.revolutions)
+        telegram_bytes = 2 * self._variant.count + 10  # values, header, status and CRC
+        if transmit_seconds(telegram_bytes, self._baud) > stride:
+            return None  # a slow line: each telegram the newest scan when it frees, at no steady period
+        return stride
+
     def next_scan_time(self) -> float | None:
         """Simulated time of the scan the next streamed telegram will carry (None when not
         streaming): the newest scan complete when the line frees, so a daemon can compute

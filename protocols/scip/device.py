@@ -36,7 +36,7 @@ from protocols.scip.requests import (
 
 SCANS_PER_SECOND = 10  # 600 rpm: scan k completes at k / 10 s
 TIMER_MODULUS = 1 << 24  # the 24-bit millisecond timer
-MAX_BACKLOG_SCANS = 10  # a poll that comes very late streams only the newest scans
+MAX_BACKLOG_SCANS = 1  # a poll that comes late (its host was behind) streams only the newest scan: skipped revolutions, never a burst
 BIT_RATES = frozenset({19200, 38400, 57600, 115200, 250000, 500000, 750000})
 MAX_SPEED_LEVEL = 10
 DEFAULT_SPEED_CODE = 99  # CR99: back to the initial speed, like CR00
@@ -206,6 +206,11 @@ class UrgDevice:
         requests choose among them), so a daemon can compute a client's very first scan ahead."""
         return {}
 
+    def scan_stride_s(self) -> float | None:
+        """The period of the MD/MS stream running (None: none runs), so a daemon can batch it from its first scans."""
+        stream = self._stream
+        return None if stream is None else (stream.request.interval + 1) / SCANS_PER_SECOND
+
     def latest_scan_time(self, now: float) -> float | None:
         """With fast timing, the scan a GD/GS received at `now` reads at once: a daemon
         computes it before handing the bytes over, so that answering never waits on a
@@ -253,6 +258,8 @@ class UrgDevice:
             return []
         period = stream.request.interval + 1
         due = (latest - stream.next_index) // period + 1
+        if stream.remaining is not None:
+            due = min(due, stream.remaining)  # the last of N scans is the newest there will be
         self._skip(stream, max(due - MAX_BACKLOG_SCANS, 0))
         outputs = []
         while self._stream is stream and stream.next_index <= latest:

@@ -25,7 +25,7 @@ from emulator.sensors.lms200 import configured_window
 def railway_pool():
     scene = load_scene("railway")
     restarts: list[str] = []
-    pool = WorkerPool(scene, [("urg",), ("lms",)], on_restart=restarts.append, nice=19)
+    pool = WorkerPool(scene, ["urg", "lms"], 2, on_restart=restarts.append, nice=19)
     pool.start()
     yield scene, pool, restarts
     pool.close()
@@ -58,7 +58,7 @@ def test_workers_compute_at_the_nice_value_asked_with_one_math_thread(railway_po
         assert b"OPENBLAS_NUM_THREADS=1" in Path(f"/proc/{pid}/environ").read_bytes().split(b"\0")
     assert "OPENBLAS_NUM_THREADS" not in os.environ
     with pytest.raises(ValueError, match="nice increment must be 0..19, got 20"):
-        WorkerPool(load_scene("railway"), [("urg",)], nice=20)
+        WorkerPool(load_scene("railway"), ["urg"], nice=20)
 
 
 def test_a_scan_cache_over_workers_serves_a_stream(railway_pool) -> None:
@@ -84,7 +84,7 @@ def test_a_killed_worker_is_restarted_and_its_jobs_computed_again(railway_pool) 
         scans = job.result(timeout=120)  # never hangs: recomputed by the new worker
         np.testing.assert_array_equal(scans[0].values, local.scan(2.0).values)
     assert pool.pids[0] != victim
-    assert len(restarts) == 1 and "scan worker 0 (sensors urg) died" in restarts[0]
+    assert len(restarts) == 1 and "scan worker 0 (sensors urg, lms) died" in restarts[0]
     later = executor.submit(pool.sensor("urg").scan, 3.0).result(timeout=60)
     np.testing.assert_array_equal(later.values, local.scan(3.0).values)
 
@@ -111,7 +111,7 @@ def test_a_restarted_worker_replays_the_world_events_applied_before_it_died() ->
     local = create_sensor(scene, "urg", world=local_world)
     untouched = create_sensor(scene, "urg", world=World(scene))
     assert not np.array_equal(local.scan(3.0).values, untouched.scan(3.0).values)  # the change shows
-    pool = WorkerPool(scene, [("urg",)], on_restart=lambda line: None)
+    pool = WorkerPool(scene, ["urg"], on_restart=lambda line: None)
     pool.start()
     try:
         assert [future.result(timeout=60) for future in pool.apply([event_record(change)])] == [1]

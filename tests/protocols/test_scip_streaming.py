@@ -72,7 +72,8 @@ def test_md_streams_the_right_scans_counts_and_stops(
     now_ms = request_ms
     for step in poll_steps_ms:
         now_ms += step
-        expected_now = [k for k in planned if k * 100 <= now_ms and k not in sent]
+        due = [k for k in planned if k * 100 <= now_ms and k not in sent]
+        expected_now = due[-1:]  # a poll later than one scan sends only the newest due: the others are skipped
         outputs = device.poll(now_ms / 1000)
         assert len(outputs) == len(expected_now)
         for output, index in zip(outputs, expected_now):
@@ -82,7 +83,7 @@ def test_md_streams_the_right_scans_counts_and_stops(
             assert echo == code + params[:11] + b"%02d" % remaining + tag
             assert stamp == index * 100
             assert values == [min(v, 4095) if width == 2 else v for v in expected_values(index, start, end, max(cluster, 1))]
-        sent += expected_now
+        sent += due
         done = count and len(sent) == count
         assert device.laser_on == (not done)
         upcoming = [k for k in planned if k not in sent]
@@ -99,30 +100,35 @@ def test_qt_stops_the_stream_after_scans_already_due():
     assert device.poll(5.0) == [] and device.next_deadline() is None and not device.laser_on
 
 
-def test_a_late_poll_sends_only_the_newest_scans_but_counts_all():
+def test_a_late_poll_sends_only_the_newest_scan_but_counts_all():
+    """A host that falls behind skips revolutions: one message with the newest scan and its own
+    stamp, the remaining count lowered by every scan skipped; never a backlog in one burst."""
     device = UrgDevice(ramp_source, timing="fast")
     device.receive(b"MD0044004501050\n", now=0.0)
     outputs = device.poll(3.0)  # 30 scans due, 50 requested
-    assert len(outputs) == 10
-    echoes = [o.data.split(b"\n", 1)[0] for o in outputs]
-    assert echoes == [b"MD00440045010%02d" % remaining for remaining in range(29, 19, -1)]
-    stamps = [parse_scan_message(o.data, 3)[2] for o in outputs]
-    assert stamps == list(range(2100, 3100, 100))
+    assert len(outputs) == 1
+    assert outputs[0].data.split(b"\n", 1)[0] == b"MD0044004501020"
+    assert parse_scan_message(outputs[0].data, 3)[2] == 3000
+    assert device.next_deadline() == 3.1
+    device.receive(b"MD0044004501003\n", now=3.0)
+    (last,) = device.poll(9.0)  # 3 requested, all due: the third and last is sent, then the laser goes off
+    assert last.data.split(b"\n", 1)[0] == b"MD0044004501000" and parse_scan_message(last.data, 3)[2] == 3300
+    assert not device.laser_on
 
 
 def test_a_new_md_replaces_the_running_one():
     device = UrgDevice(ramp_source, timing="fast")
     device.receive(b"MD0044072501000\n", now=0.0)
     device.receive(b"MS0100010102003\n", now=0.3)
-    outputs = device.poll(0.5)
-    assert [o.data.split(b"\n", 1)[0] for o in outputs] == [b"MS0100010102002", b"MS0100010102001"]
-    assert [parse_scan_message(o.data, 2)[2] for o in outputs] == [400, 500]
+    outputs = device.poll(0.5)  # a poll one scan late: the newest only (0.4 s skipped)
+    assert [o.data.split(b"\n", 1)[0] for o in outputs] == [b"MS0100010102001"]
+    assert [parse_scan_message(o.data, 2)[2] for o in outputs] == [500]
 
 
 def test_gd_while_streaming_is_answered_between_scans():
     device = UrgDevice(ramp_source, timing="fast")
     device.receive(b"MD0044072501003\n", now=0.0)
-    outputs = device.receive(b"GD0044072501\n", now=0.2)
-    assert [o.data.split(b"\n", 2)[1] for o in outputs] == [b"99b", b"99b", b"00P"]
-    assert [o.droppable for o in outputs] == [True, True, False]
+    outputs = device.receive(b"GD0044072501\n", now=0.2)  # not polled at 0.1: that scan is skipped
+    assert [o.data.split(b"\n", 2)[1] for o in outputs] == [b"99b", b"00P"]
+    assert [o.droppable for o in outputs] == [True, False]
     assert device.laser_on and device.next_deadline() == 0.3
