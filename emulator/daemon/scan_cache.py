@@ -53,8 +53,8 @@ STRIDE_TOLERANCE_S = 1e-6
 PREFETCH_LEAD_S = 0.07
 # A behind stream is foreseen every m-th scan, m at most this (a sensor then sends one scan in 32).
 MAX_SPACING = 32
-# A spaced stream's batch spans at most this many strides, so a spacing chosen once soon gives way to a newer one.
-MAX_BATCH_SPAN_STRIDES_PER_SCAN = 4  # × the batch size
+# A spaced stream's batch spans at most this many strides per scan of a batch, so a spacing chosen once soon gives way to a newer one.
+MAX_BATCH_SPAN_STRIDES_PER_SCAN = 4
 DEMAND_GRACE_S = 0.2  # a stream's demand lapses this long (wall) after two of its scans failed to come
 
 
