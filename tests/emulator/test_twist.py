@@ -8,12 +8,15 @@ commands (small Runge-Kutta steps, not the daemon's closed-form arc). The
 robot stops where its footprint touches a wall or a barrel, never inside;
 its watchdog stops it when the commands stop; refused twists get a 4xx
 naming the limit; the event log replayed gives the same poses bit for bit,
-and the WebSocket streams the pose while the robot moves.
+and the WebSocket streams the pose while the robot moves. Against the real
+daemon: the documented `ctl pose` / `ctl twist` drive, its replay, and
+Foxglove's /tf (live and recorded).
 """
 
 from __future__ import annotations
 
 import asyncio
+import base64
 import json
 import math
 import subprocess
@@ -27,7 +30,9 @@ from control_support import call
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from mcap.reader import make_reader
+from mcap.records import Schema
 from mcap_protobuf.decoder import DecoderFactory as ProtobufDecoderFactory
+from websockets.sync.client import connect
 
 from emulator.bench.serve_process import ServeProcess, serve_command
 from emulator.control.events import ControlError, EventWriter, read_events, world_events
@@ -513,3 +518,28 @@ def test_whatever_twist_a_client_sends_is_applied_or_refused_and_the_robot_stays
         x, y, _ = robot["position"]
         assert all(math.isfinite(value) for value in (x, y, robot["rotation_deg"][2]))
         assert outlines.clearance(np.array([[x, y]]))[0] >= RADIUS - 1e-9  # never inside a solid
+
+
+def test_foxglove_live_publishes_the_driven_robot_on_tf(tmp_path: Path) -> None:
+    """A Foxglove WebSocket client subscribed to /tf sees the robot's frame move while it is driven."""
+    with ServeProcess(SCENE, ["urg=tcp:127.0.0.1:0", f"lms=pty:{tmp_path / 'lms'}"],
+                      extra_args=("--foxglove", "127.0.0.1:0")) as daemon:
+        with connect(daemon.service("foxglove"), subprotocols=["foxglove.sdk.v1"], open_timeout=10) as websocket:
+            advertised = None
+            while advertised is None:
+                frame = websocket.recv(timeout=10)
+                if isinstance(frame, str) and json.loads(frame).get("op") == "advertise":
+                    advertised = next(c for c in json.loads(frame)["channels"] if c["topic"] == "/tf")
+            schema = Schema(id=1, name=advertised["schemaName"], encoding="protobuf",
+                            data=base64.b64decode(advertised["schema"]))
+            decode = ProtobufDecoderFactory().decoder_for("protobuf", schema)
+            websocket.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 1, "channelId": advertised["id"]}]}))
+            xs: list[float] = []
+            deadline = time.monotonic() + 20
+            while len(set(xs)) < 4 and time.monotonic() < deadline:
+                assert call(daemon.control_url, "PUT", "/api/bodies/robot/twist", {"vx": 0.5})[0] == 200
+                frame = websocket.recv(timeout=10)
+                if isinstance(frame, bytes) and frame[0] == 0x01:
+                    transforms = decode(frame[13:]).transforms
+                    xs += [t.translation.x for t in transforms if t.child_frame_id == "robot"]
+    assert len(set(xs)) >= 4 and xs[-1] > xs[0] >= 5.0, xs  # east from (5, 1.75), frame after frame
