@@ -343,14 +343,14 @@ class _EventLog:
         self._arrays = {name: np.zeros((16, *shape)) for name, shape in self._COLUMNS.items()}
 
     def append(self, time_s: float, position: np.ndarray, quaternion: np.ndarray,
-               twist: np.ndarray = np.zeros(3), until_s: float | None = None) -> None:
+               twist: np.ndarray | None = None, until_s: float | None = None) -> None:
         with self._lock:
             times = self._arrays["times"]
             if self._count and time_s < times[self._count - 1]:
                 raise ValueError(f"live pose at {time_s} s is earlier than the last one ({times[self._count - 1]} s)")
             if self._count == len(times):  # grow into new arrays: earlier snapshots keep the old ones
                 self._arrays = {name: np.concatenate([array, np.zeros_like(array)]) for name, array in self._arrays.items()}
-            row = {"times": time_s, "positions": position, "quaternions": quaternion, "twists": twist,
+            row = {"times": time_s, "positions": position, "quaternions": quaternion, "twists": 0.0 if twist is None else twist,
                    "until": time_s if until_s is None else until_s}
             for name, value in row.items():
                 self._arrays[name][self._count] = value

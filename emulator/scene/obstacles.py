@@ -40,6 +40,7 @@ CONTACT_TOLERANCE_M = 1e-6  # a centre this much inside `radius` still counts as
 COARSE_STEPS = 20  # the path is screened every 20 samples (2 cm); only the spans that may touch are sampled finely
 SAMPLES_PER_PASS = 256  # centre samples compared with the outlines in the first pass: a blocked twist ends early
 MAX_SAMPLES_PER_PASS = 4096  # later passes double up to this (a long path along a wall: fewer, larger passes)
+MAX_SLABS = 16  # slabs of heights whose outlines are kept (one per live body and height it was posed at)
 REFINEMENTS = 4  # rounds narrowing the contact between the last free and the first blocked sample
 REFINE_SAMPLES = 32  # intervals each round splits into
 
@@ -121,14 +122,21 @@ class Obstacles:
 
     def __init__(self, scene: Scene) -> None:
         self._scene = scene
+        self._outlines: dict[tuple[float, float], Outlines] = {}
 
     @functools.cached_property
     def _meshes(self) -> list[trimesh.Trimesh]:
         return static_solids(self._scene)
 
-    @functools.lru_cache(maxsize=16)
     def outlines(self, low_z: float, high_z: float) -> Outlines:
-        return slab_outlines(self._meshes, low_z, high_z)
+        """The solids within heights [low_z, high_z] seen from above, cut once per slab (a body's
+        height changes only by a pose; at most MAX_SLABS kept)."""
+        key = (low_z, high_z)
+        if key not in self._outlines:
+            if len(self._outlines) >= MAX_SLABS:
+                self._outlines.pop(next(iter(self._outlines)))
+            self._outlines[key] = slab_outlines(self._meshes, low_z, high_z)
+        return self._outlines[key]
 
     def travel_time(self, drive: Drive, position: np.ndarray, quaternion: np.ndarray, twist: np.ndarray,
                     horizon_s: float) -> float:
@@ -169,9 +177,9 @@ class Obstacles:
                              count: int, step_s: float, horizon_s: float, outlines: Outlines) -> tuple[Outlines, np.ndarray]:
         """The outlines near the path, and which of its samples 0..count (every STEP_M) can meet them.
 
-        The clearance changes no faster than the centre moves, so between two coarse samples COARSE_M
-        of path apart with clearances d1, d2 it stays above (d1 + d2 - COARSE_M) / 2: where that is
-        at least the radius, the samples in between cannot touch anything and are skipped.
+        The clearance changes no faster than the centre moves, so between two coarse samples L of path
+        apart (COARSE_STEPS samples) with clearances d1, d2 it stays above (d1 + d2 - L) / 2: where
+        that is at least the radius, the samples in between cannot touch anything and are skipped.
         """
         every = COARSE_STEPS
         coarse = np.append(np.arange(0, count, every), count)
