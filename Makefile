@@ -5,7 +5,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 SCENE  ?= railway
 
-.PHONY: runtime install serve test soak bench validation lint clean
+.PHONY: runtime install serve test soak robustness-soak bench validation lint clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -30,8 +30,12 @@ serve: runtime
 test: install
 	$(BIN)/python -m pytest -q
 
-# The robustness suite at length: every attack ROBUSTNESS_SCALE times longer (CI runs it at 1 in `make test`).
+# An hour of the real daemon under everything at once (docs/performance.md, "Soak"); SOAK_MINUTES=N for less.
 soak: install
+	$(BIN)/lrf-emulator bench --section soak --minutes $${SOAK_MINUTES:-60}
+
+# The robustness suite at length: every attack ROBUSTNESS_SCALE times longer (CI runs it at 1 in `make test`).
+robustness-soak: install
 	ROBUSTNESS_SCALE=$${ROBUSTNESS_SCALE:-10} $(BIN)/python -m pytest -q -m robustness
 
 bench: install

@@ -30,6 +30,9 @@ object and `lines` are printed in the table. Add a section by adding it to `SECT
 - slam: `rescue`'s loop in its smoke, mapped by MRPT's icp-slam from the URG-04LX and from a
   UTM-30LX-EW on the same mount with its first and then its last echo (`slam_echoes`): ATE of each.
 - memory: peak resident set size of this process (last, so it covers the others).
+
+Long sections run only when named (`--section soak`): `soak` (`emulator.bench.soak`)
+runs the daemon under everything at once for `--minutes` (default 60; `make soak`).
 """
 
 from __future__ import annotations
@@ -292,6 +295,12 @@ def memory_section(quick: bool) -> Section:
     return {"peak_rss_mb": peak_mb}, [f"memory: peak RSS {peak_mb:.1f} MB (this process)"]
 
 
+def soak_section(quick: bool, minutes: float | None = None) -> Section:
+    from emulator.bench.soak import soak_section as soak  # starts daemons and clients: imported only when run
+
+    return soak(quick, minutes)
+
+
 SECTIONS: dict[str, Callable[[bool], Section]] = {
     "rays": rays_section,
     "scans": scans_section,
@@ -304,4 +313,9 @@ SECTIONS: dict[str, Callable[[bool], Section]] = {
     "cola": cola_section,
     "slam": slam_section,
     "memory": memory_section,
+}
+
+# sections run only when asked for by name, given `--minutes`
+LONG_SECTIONS: dict[str, Callable[[bool, float | None], Section]] = {
+    "soak": soak_section,
 }

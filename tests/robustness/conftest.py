@@ -1,6 +1,6 @@
 """The robustness suite: attacks on the real daemon (`lrf-emulator serve`).
 
-Marked `robustness`; `ROBUSTNESS_SCALE` (default 1, `make soak` sets more)
+Marked `robustness`; `ROBUSTNESS_SCALE` (default 1, `make robustness-soak` sets more)
 multiplies attack durations and hypothesis example counts.
 """
 
