@@ -8,10 +8,16 @@ JSON object per line, `{"t": time_s, "op": ..., "name": ..., ...}` with the
 body's keys, and reads back into the same events, so a session can be
 replayed scan for scan.
 
-Values are checked by the scene loader's own rules and words
+Values are checked by the scene loader's own rules, limits and words
 (`checked_values`): a density the loader would refuse in a scene file is
 refused here with the same message, e.g.
-`smoke.regions[room].density: must be >= 0, got -1`.
+`smoke.regions[room].density: must be <= 1000, got 1e+300`. What depends on
+the changes before (the particle budget across every plume, a live body's
+speed) is checked by the session's `LiveLimits` (scene/live_limits.py): a
+plume's rate that could make more particles alive at once than a scene file
+may have is refused, naming the budget. A log (`--events-in`) is read
+through the same checks in its order, so a log no live session could have
+made is refused at load.
 """
 
 from __future__ import annotations
@@ -27,7 +33,8 @@ from emulator.errors import SceneError, UserError
 from emulator.scene.drive import Twist
 from emulator.scene.live import ClockChange, LiveEvent, PlumeChange, PoseChange, RegionChange, TwistChange, event_record
 from emulator.scene.bodies import Live
-from emulator.scene.loader import checked_values
+from emulator.scene.live_limits import LiveLimits
+from emulator.scene.loader import MAX_DENSITY, MAX_EXTENT_M, checked_values
 from emulator.scene.model import Pose, Scene
 from emulator.sensors.scan import TICKS_PER_S
 
@@ -67,9 +74,10 @@ def live_bodies(scene: Scene) -> dict[str, Any]:
     return {body.name: body for body in scene.bodies if isinstance(body.trajectory, Live)}
 
 
-def change(scene: Scene, op: Any, name: Any, body: Any, time_s: float) -> LiveEvent:
-    """The event a change request makes at `time_s`; ControlError (404 unknown name, 400 a refused
-    value, 409 a change the resource does not allow) otherwise."""
+def change(scene: Scene, op: Any, name: Any, body: Any, time_s: float, limits: LiveLimits) -> LiveEvent:
+    """The event a change request makes at `time_s` after the changes `limits` has seen; ControlError
+    (404 unknown name, 400 a refused value or a limit it would break, 409 a change the resource does
+    not allow) otherwise. `limits` is not told of it: `record` does that once it is applied."""
     if op not in OPS:
         raise ControlError(400, f"op: must be one of {', '.join(OPS)}, got {_short(op)}", "op")
     if op == "clock":
@@ -80,17 +88,20 @@ def change(scene: Scene, op: Any, name: Any, body: Any, time_s: float) -> LiveEv
         where = f"smoke.regions[{name}]"
         _known(name, [region.name for region in scene.regions], "smoke region", where)
         values = _values(where, body, ("density",))
-        return RegionChange(time_s, name, _read(values.number, "density", at_least=0))
+        return RegionChange(time_s, name, _read(values.number, "density", at_least=0, at_most=MAX_DENSITY))
     if op == "plume":
         where = f"smoke.plumes[{name}]"
         _known(name, [plume.name for plume in scene.plumes], "plume", where)
         values = _values(where, body, PLUME_KEYS)
         _at_least_one(values, PLUME_KEYS, where)
+        rate = _read(values.number, "rate", above=0) if "rate" in values else None
+        if rate is not None and (why := limits.particles.refusal(name, time_s, rate)) is not None:
+            raise ControlError(400, f"{where}.rate: {why}", f"{where}.rate")
         return PlumeChange(
             time_s,
             name,
             emitting=_read(values.boolean, "emitting") if "emitting" in values else None,
-            rate=_read(values.number, "rate", above=0) if "rate" in values else None,
+            rate=rate,
             wind=_read(values.vec3, "wind") if "wind" in values else None,
         )
     where = f"bodies[{name}]"
@@ -101,7 +112,18 @@ def change(scene: Scene, op: Any, name: Any, body: Any, time_s: float) -> LiveEv
         raise ControlError(409, f'{where}: its trajectory is not "live": its {what} from outside', where)
     if op == "twist":
         return TwistChange(time_s, name, _twist(where, body, scene.body(name).drive))
-    return PoseChange(time_s, name, _pose(where, body))
+    pose = _pose(where, body)
+    if (why := limits.speed_refusal(name, time_s, pose.position)) is not None:
+        raise ControlError(400, f"{where}.position: {why}", f"{where}.position")
+    return PoseChange(time_s, name, pose)
+
+
+def record(limits: LiveLimits, event: LiveEvent) -> None:
+    """Tell `limits` of an applied event, so the next change is checked against it."""
+    if isinstance(event, PlumeChange) and event.rate is not None:
+        limits.particles.add(event.name, event.time_s, event.rate)
+    elif isinstance(event, PoseChange):
+        limits.add_pose(event.name, event.time_s, event.pose.position)
 
 
 def _twist(where: str, body: Any, drive: Any) -> Twist:
@@ -139,7 +161,7 @@ def _pose(where: str, body: Any) -> Pose:
         raise ControlError(400, f"{where}.yaw_deg: give rotation_deg or yaw_deg, not both", f"{where}.yaw_deg")
     position = _read(values.vec3, "position")
     if "yaw_deg" in values:
-        rotation = (0.0, 0.0, _read(values.number, "yaw_deg"))
+        rotation = (0.0, 0.0, _read(values.number, "yaw_deg", at_least=-MAX_EXTENT_M, at_most=MAX_EXTENT_M))
     else:
         rotation = _read(values.vec3, "rotation_deg", (0.0, 0.0, 0.0))
     return Pose(position, rotation)
@@ -186,8 +208,9 @@ def event_json(event: LiveEvent) -> dict[str, Any]:
     return {**record, "t": round(event.time_s, TIME_DECIMALS)}
 
 
-def event_from_json(scene: Scene, data: Any) -> LiveEvent:
-    """The event of one log line (a dict); ControlError if the scene would refuse it."""
+def event_from_json(scene: Scene, data: Any, limits: LiveLimits) -> LiveEvent:
+    """The event of one log line (a dict) after the lines `limits` has seen; ControlError if the scene
+    or its limits would refuse it."""
     if not isinstance(data, dict):
         raise ControlError(400, f"expected a JSON object, got {_short(data)}")
     body = dict(data)
@@ -195,22 +218,25 @@ def event_from_json(scene: Scene, data: Any) -> LiveEvent:
     if isinstance(time_value, bool) or not isinstance(time_value, (int, float)) or not 0 <= time_value < math.inf:
         raise ControlError(400, f"t: expected a time in seconds >= 0, got {_short(time_value)}", "t")
     op, name = body.pop("op", None), body.pop("name", None)
-    return change(scene, op, name, body, round(float(time_value), TIME_DECIMALS))
+    return change(scene, op, name, body, round(float(time_value), TIME_DECIMALS), limits)
 
 
 def read_events(path: str | os.PathLike[str], scene: Scene) -> list[LiveEvent]:
-    """Every event of a log file, in order; one UserError line naming the file and line otherwise."""
+    """Every event of a log file, in order, each checked after the ones before it (the particle budget,
+    a body's speed); one UserError line naming the file, the line and the limit otherwise."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as error:
         raise UserError(f"{path}: cannot read the event log: {getattr(error, 'strerror', None) or error}") from None
     events = []
+    limits = LiveLimits(scene)
     for number, line in enumerate(text.splitlines(), start=1):
         if not line.strip():
             continue
         try:
-            events.append(event_from_json(scene, json.loads(line)))
+            events.append(event_from_json(scene, json.loads(line), limits))
+            record(limits, events[-1])
         except (ValueError, RecursionError):
             raise UserError(f"{path.name}: line {number}: not a JSON object") from None
         except ControlError as error:

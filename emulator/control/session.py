@@ -16,9 +16,10 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from emulator.control.events import ControlError, EventWriter, change, change_instant, event_json
+from emulator.control.events import ControlError, EventWriter, change, change_instant, event_json, record
 from emulator.daemon.service import Daemon
 from emulator.scene.live import LiveEvent
+from emulator.scene.live_limits import LiveLimits
 from emulator.scene.model import Pose, Scene
 
 Listener = Callable[[LiveEvent], None]
@@ -31,6 +32,7 @@ class LiveSession:
         self.daemon = daemon
         self.scene: Scene = daemon.scene
         self.events: list[LiveEvent] = []
+        self.limits = LiveLimits(self.scene)  # the scene file's limits, for every change in turn
         self._writer = writer
         self._listeners: list[Listener] = []
 
@@ -43,7 +45,7 @@ class LiveSession:
         """A change asked for now: checked (ControlError), stamped with the next µs tick, applied."""
         if self.daemon.live is None and op != "clock":
             raise ControlError(409, "this daemon serves recorded scans: its world cannot change", "op")
-        event = change(self.scene, op, name, body, change_instant(self.daemon.clock.now()))
+        event = change(self.scene, op, name, body, change_instant(self.daemon.clock.now()), self.limits)
         return self.apply(event)
 
     def apply(self, event: LiveEvent) -> LiveEvent:
@@ -55,6 +57,7 @@ class LiveSession:
         except ValueError as error:
             raise ControlError(409, str(error), f"bodies[{event.name}]") from None
         self.events.append(event)
+        record(self.limits, event)
         if self._writer is not None:
             self._writer.write(event)
         for listener in list(self._listeners):

@@ -8,9 +8,11 @@ and the key, e.g. ``railway.toml: smoke.plumes[1].rate: must be > 0, got -3``.
 
 A scene's cost is bounded before anything is built (docs/scene-format.md,
 "Limits"): coordinates and lengths within MAX_EXTENT_M, at most
-MAX_PARTICLES_ALIVE plume particles alive at once (Σ rate × lifetime), at most
+MAX_PARTICLES_ALIVE plume particles alive at once (Σ rate × lifetime), smoke
+densities up to MAX_DENSITY, bodies no faster than MAX_BODY_SPEED_M_S, at most
 MAX_SCENE_ITEMS objects, regions and plumes together, and MAX_MESH_TRIANGLES
-mesh triangles in all.
+mesh triangles in all. Live changes (emulator/control) are held to the same
+limits through `particle_budget_error` and these constants.
 """
 
 from __future__ import annotations
@@ -230,7 +232,15 @@ class _Place:
 
 # Limits on what a scene may cost (docs/scene-format.md, "Limits").
 MAX_EXTENT_M = 100_000.0  # every coordinate, length, speed (m, m/s) lies within ±100 km
-MAX_PARTICLES_ALIVE = 20_000  # Σ over plumes of rate × lifetime (railway has 80; 10 000 cost 24 ms a scan)
+# Σ over plumes of rate × lifetime: the bound on a scan's smoke cost, so that a scan stays within its
+# sensor's period even after a live change (docs/scene-format.md, "Limits"; railway has 80, marulan 462)
+MAX_PARTICLES_ALIVE = 2_000
+# Far beyond opaque (× the default 250 /m per unit: an extinction of 250 000 /m), and every product of
+# density, extinction and range stays finite in float64.
+MAX_DENSITY = 1000.0
+MAX_DENSITY_TO_EXTINCTION = 1e6  # 1/m per density unit
+# Faster than anything a scanner rides on; a faster body's scan spreads its beams over more of the scene.
+MAX_BODY_SPEED_M_S = 1000.0
 MAX_SCENE_ITEMS = 10_000  # objects + smoke regions + plumes
 MAX_MESH_TRIANGLES = 2_000_000  # triangles of every mesh file, counted once per use
 MAX_SENSORS = 256  # a fleet-sized scene: bench --section serve runs 120 sensors in one daemon
@@ -423,7 +433,7 @@ def _build_scene(raw: dict[str, Any], path: Path) -> Scene:
         description=description,
         seed=header.integer("seed", 0, at_least=0),
         model=header.string("model", "formsma2011", SCENE_MODELS),
-        density_to_extinction=header.number("density_to_extinction", 250.0, above=0),
+        density_to_extinction=header.number("density_to_extinction", 250.0, above=0, at_most=MAX_DENSITY_TO_EXTINCTION),
         materials=materials,
         objects=objects,
         regions=_regions(region_tables, path.parent, budget),
@@ -532,7 +542,7 @@ def _density(table: _Table) -> Density:
         return _keyframes(_as_table(raw, place, ("keyframes",)))
     if isinstance(raw, bool) or not isinstance(raw, (int, float)):
         raise place.error(f"expected a number or {{ keyframes = [[time, density], ...] }}, got {_show(raw)}")
-    return Density(((0.0, table.number("density", at_least=0)),))
+    return Density(((0.0, table.number("density", at_least=0, at_most=MAX_DENSITY)),))
 
 
 def _keyframes(table: _Table) -> Density:
@@ -547,7 +557,7 @@ def _keyframes(table: _Table) -> Density:
             raise pair_place.error(f"expected [time, density], got {_show(pair)}")
         time_s = _as_number(pair[0], pair_place.index(0))
         density = _as_number(pair[1], pair_place.index(1))
-        _check_bounds(density, pair[1], pair_place.index(1), at_least=0)
+        _check_bounds(density, pair[1], pair_place.index(1), at_least=0, at_most=MAX_DENSITY)
         if keyframes and time_s < keyframes[-1][0]:
             raise pair_place.index(0).error(
                 f"keyframe times must not decrease, got {_show(pair[0])} after {_show(raw[position - 1][0])}"
@@ -596,7 +606,7 @@ def _plumes(tables: list[_Table]) -> tuple[Plume, ...]:
                 velocity=table.vec3("velocity", ORIGIN),
                 spread=table.number("spread", 0.0, at_least=0, at_most=MAX_EXTENT_M),
                 wind=table.vec3("wind", ORIGIN),
-                density=table.number("density", at_least=0),
+                density=table.number("density", at_least=0, at_most=MAX_DENSITY),
                 start=start,
                 stop=stop,
             )
@@ -605,9 +615,14 @@ def _plumes(tables: list[_Table]) -> tuple[Plume, ...]:
         if alive > MAX_PARTICLES_ALIVE:
             raise table.place.key("rate").error(
                 f"rate × lifetime of the plumes so far is {alive:.6g} particles alive at once; "
-                f"a scene may have at most {MAX_PARTICLES_ALIVE} (lower rate or lifetime)"
+                f"{particle_budget_words()} (lower rate or lifetime)"
             )
     return tuple(plumes)
+
+
+def particle_budget_words() -> str:
+    """How a refusal names the particle budget (scene files and live changes alike)."""
+    return f"the particle budget allows at most {MAX_PARTICLES_ALIVE}"
 
 
 # --------------------------------------------------------------------------- sensors
@@ -837,7 +852,23 @@ def _pose_keyframes(table: _Table, pose: Pose) -> Keyframes:
         angles = np.column_stack([np.full(count, roll), np.full(count, pitch), table_rows[:, 3]])
     else:
         positions, angles = table_rows[:, 1:4], table_rows[:, 4:7]
+    _check_speed(table_rows[:, 0], positions, lambda row: place.index(row).error)
     return _frozen_keyframes(table_rows[:, 0], positions, euler_quaternion(angles))
+
+
+def _check_speed(times: np.ndarray, positions: np.ndarray, error_at) -> None:
+    """Between rows at different times a body moves at most MAX_BODY_SPEED_M_S (rows at one time are a jump)."""
+    steps = np.diff(times)
+    distances = np.linalg.norm(np.diff(positions, axis=0), axis=1)
+    moving = steps > 0
+    speeds = np.zeros_like(steps)
+    speeds[moving] = distances[moving] / steps[moving]
+    if np.any(speeds > MAX_BODY_SPEED_M_S):
+        row = int(np.argmax(speeds > MAX_BODY_SPEED_M_S)) + 1
+        raise error_at(row)(
+            f"the body moves {distances[row - 1]:.6g} m in {steps[row - 1]:.6g} s, {speeds[row - 1]:.6g} m/s;"
+            f" a body may move at most {MAX_BODY_SPEED_M_S:g} m/s"
+        )
 
 
 def _frozen_keyframes(times: np.ndarray, positions: np.ndarray, quaternions: np.ndarray) -> Keyframes:
@@ -888,6 +919,8 @@ def _tum_file(path: Path, place: _Place) -> Keyframes:
     if not rows:
         raise place.error(f"{path.name} holds no pose (lines 't x y z qx qy qz qw')")
     table = np.array(rows)
+    line_numbers = [number for number, line in enumerate(lines, start=1) if line.split() and not line.split()[0].startswith("#")]
+    _check_speed(table[:, 0], table[:, 1:4], lambda row: lambda message: place.error(f"{path.name} line {line_numbers[row]}: {message}"))
     quaternions = table[:, 4:8] / np.linalg.norm(table[:, 4:8], axis=1, keepdims=True)
     return _frozen_keyframes(table[:, 0].copy(), table[:, 1:4].copy(), quaternions)
 

@@ -18,6 +18,7 @@ import pytest
 from emulator import cli
 from emulator.commands.stopping import STOP_SIGNALS
 from emulator.bench.serve_process import serve_command
+from emulator.scene.loader import MAX_BODY_SPEED_M_S, MAX_DENSITY, MAX_PARTICLES_ALIVE
 
 SENSOR = """
 [[sensors]]
@@ -32,7 +33,18 @@ source = [1.0, 0.0, 0.0]
 rate = {rate}
 lifetime = {lifetime}
 size = 0.2
-density = 1.0
+density = {density}
+"""
+REGION = """
+[[smoke.regions]]
+name = "room"
+box = {{ size = [4.0, 4.0, 3.0] }}
+density = {density}
+"""
+BODY = """
+[[bodies]]
+name = "robot"
+trajectory = {{ keyframes = [[0.0, 0.0, 0.0, 0.0], [{t}, 50.0, 0.0, 0.0]] }}
 """
 BOX = """
 [[objects]]
@@ -48,9 +60,10 @@ mesh = "{mesh}"
 
 # name → (scene text, what the one error line must contain)
 SCENES: dict[str, tuple[str, tuple[str, ...]]] = {
-    "plume rate 1e9": (PLUME.format(rate=1e9, lifetime=2.0) + SENSOR, ("smoke.plumes[0].rate", "at most 20000")),
-    "plume rate 1e5": (PLUME.format(rate=1e5, lifetime=2.0) + SENSOR, ("smoke.plumes[0].rate",)),
-    "plume lifetime 1e12": (PLUME.format(rate=10, lifetime=1e12) + SENSOR, ("smoke.plumes[0].rate",)),
+    "plume rate 1e9": (PLUME.format(rate=1e9, lifetime=2.0, density=1.0) + SENSOR,
+                       ("smoke.plumes[0].rate", f"particle budget allows at most {MAX_PARTICLES_ALIVE}")),
+    "plume rate 1e5": (PLUME.format(rate=1e5, lifetime=2.0, density=1.0) + SENSOR, ("smoke.plumes[0].rate",)),
+    "plume lifetime 1e12": (PLUME.format(rate=10, lifetime=1e12, density=1.0) + SENSOR, ("smoke.plumes[0].rate",)),
     "box of 1e308": (BOX.format(size="1e308") + SENSOR, ("objects[0].box.size[0]", "within")),
     "position 1e300": (BOX.format(size="1.0").replace("[3.0, 0.0, 0.0]", "[1e300, 0.0, 0.0]") + SENSOR,
                        ("objects[0].position[0]",)),
@@ -67,6 +80,19 @@ SCENES: dict[str, tuple[str, tuple[str, ...]]] = {
                     ("sensors[256]", "257 sensors; a scene may have at most 256")),
     "no sensors": (BOX.format(size=1.0), ("sensors",)),
     "empty file": ("", ("sensors",)),
+}
+
+
+# Limits added to the scene format later: on a daemon without them `serve` would run, so these go
+# through the installed command with its timeout.
+OVER_LIMITS: dict[str, tuple[str, tuple[str, ...]]] = {
+    "plume density 1e300": (PLUME.format(rate=10, lifetime=2.0, density=1e300) + SENSOR,
+                            ("smoke.plumes[0].density", f"must be <= {MAX_DENSITY:g}")),
+    "region density 1e300": (REGION.format(density=1e300) + SENSOR, ("smoke.regions[0].density", f"must be <= {MAX_DENSITY:g}")),
+    "keyframe density 1e300": (REGION.format(density="{ keyframes = [[0, 0.0], [10, 1e300]] }") + SENSOR,
+                               ("smoke.regions[0].density.keyframes[1][1]", f"must be <= {MAX_DENSITY:g}")),
+    "body at 50 km/s": (BODY.format(t=0.001) + SENSOR,
+                        ("bodies[0].trajectory.keyframes[1]", f"at most {MAX_BODY_SPEED_M_S:g} m/s")),
 }
 
 
@@ -127,6 +153,21 @@ def test_a_hostile_scene_is_one_line_exit_2(
     if case in INSTALLED_COMMAND_CASES:
         assert_one_line_exit_2(run(args, tmp_path), where, *needles)
     assert_one_line_exit_2(run_main(args, tmp_path, capsys, monkeypatch), where, *needles)
+    assert not os.path.lexists(tmp_path / "ttyURG0")
+
+
+@pytest.mark.parametrize("case", sorted(OVER_LIMITS))
+@pytest.mark.parametrize("command", ["scan", "serve"])
+def test_a_scene_over_a_limit_is_one_line_exit_2(tmp_path: Path, case: str, command: str) -> None:
+    text, needles = OVER_LIMITS[case]
+    scene = tmp_path / "hostile.toml"
+    scene.write_text(text.replace("{tmp}", str(tmp_path)))
+    args = ["scan", str(scene), "--sensor", "urg"] if command == "scan" else ["serve", str(scene)]
+    try:
+        result = run(args, tmp_path)
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"{command} accepted a scene over a limit ({case}) and ran on")
+    assert_one_line_exit_2(result, "hostile.toml", *needles)
     assert not os.path.lexists(tmp_path / "ttyURG0")
 
 

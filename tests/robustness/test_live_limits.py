@@ -1,0 +1,196 @@
+"""Live changes held to the scene file's limits, against the real daemon.
+
+A rate that would blow the particle budget, a density past the bound, a body
+teleported faster than a body may move: each is refused with a 400 naming
+the limit (HTTP, WebSocket and `ctl` alike), the world stays as it was and
+the sensors keep streaming. A change up to the budget is accepted and scans
+stay within a period. An event log that breaks a limit is refused at load,
+one line, exit 2, by every command that reads one.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from emulator.bench.serve_process import ServeProcess, serve_command
+from emulator.scene import load_scene
+from emulator.scene.loader import MAX_BODY_SPEED_M_S, MAX_DENSITY, MAX_PARTICLES_ALIVE
+
+MD_UNLIMITED = b"MD0044072501000\n"
+URG_PERIOD_S = 0.1
+
+
+def request(url: str, method: str, path: str, body: object) -> tuple[int, dict]:
+    data = json.dumps(body).encode()
+    call = urllib.request.Request(url + path, data=data, method=method, headers={"Content-Type": "application/json"})
+    try:
+        with urllib.request.urlopen(call, timeout=10) as answer:
+            return answer.status, json.loads(answer.read())
+    except urllib.error.HTTPError as error:
+        return error.code, json.loads(error.read())
+
+
+class UrgStream:
+    """An endless MD stream over TCP; the arrival time of each scan."""
+
+    def __init__(self, address: tuple[str, int]) -> None:
+        self.sock = socket.create_connection(address, timeout=5)
+        self.sock.sendall(MD_UNLIMITED)
+        self.buffer = b""
+        self.arrivals: list[float] = []
+
+    def read_for(self, seconds: float) -> list[float]:
+        """Scans' arrival times over the next `seconds`."""
+        start, end = len(self.arrivals), time.monotonic() + seconds
+        self.sock.settimeout(0.05)
+        while time.monotonic() < end:
+            try:
+                data = self.sock.recv(65536)
+            except socket.timeout:
+                continue
+            assert data, "the daemon closed the stream"
+            self.buffer += data
+            while (cut := self.buffer.find(b"\n\n")) >= 0:
+                message, self.buffer = self.buffer[:cut], self.buffer[cut + 2 :]
+                if message.split(b"\n")[1:2] == [b"99b"]:
+                    self.arrivals.append(time.monotonic())
+        return self.arrivals[start:]
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def longest_gap_s(arrivals: list[float]) -> float:
+    return float(np.max(np.diff(arrivals))) if len(arrivals) > 1 else float("inf")
+
+
+@pytest.mark.parametrize(
+    "scene, plume, rate",
+    [("rescue", "smoulder", 1e9), ("railway", "fire_debris", 100_000)],
+)
+def test_a_rate_over_the_particle_budget_is_refused_and_scans_go_on(scene: str, plume: str, rate: float) -> None:
+    with ServeProcess(scene, ["urg=tcp:127.0.0.1:0"]) as served:
+        stream = UrgStream(served.endpoint("urg", "tcp").address)
+        try:
+            stream.read_for(1.0)
+            status, answer = request(served.control_url, "PATCH", f"/api/smoke/plumes/{plume}", {"rate": rate})
+            after = stream.read_for(3.0)
+        finally:
+            stream.close()
+        assert status == 400, answer
+        assert f"particle budget allows at most {MAX_PARTICLES_ALIVE}" in answer["error"], answer
+        assert answer["key"] == f"smoke.plumes[{plume}].rate"
+        state = _state(served)
+        assert state["plumes"][plume]["rate"] == next(p.rate for p in load_scene(scene).plumes if p.name == plume)
+        assert len(after) >= 20 and longest_gap_s(after) < 1.0, "the sensor went silent"
+
+
+def _state(served: ServeProcess) -> dict:
+    with urllib.request.urlopen(served.control_url + "/api/state", timeout=10) as answer:
+        return json.loads(answer.read())
+
+
+def test_a_density_past_the_bound_is_refused_live(tmp_path: Path) -> None:
+    with ServeProcess("railway", ["urg=tcp:127.0.0.1:0"]) as served:
+        region = load_scene("railway").regions[0].name
+        status, answer = request(served.control_url, "PATCH", f"/api/smoke/regions/{region}", {"density": 1e300})
+        assert status == 400 and f"must be <= {MAX_DENSITY:g}" in answer["error"], answer
+        assert answer["key"] == f"smoke.regions[{region}].density"
+        status, _ = request(served.control_url, "PATCH", f"/api/smoke/regions/{region}", {"density": MAX_DENSITY})
+        assert status == 200
+        ctl = subprocess.run(
+            [*serve_command(), "ctl", "--url", served.control_url, "plume", "fire_debris", "rate", "1e9"],
+            capture_output=True, text=True, timeout=60,
+        )
+        lines = ctl.stderr.strip().splitlines()
+        assert ctl.returncode == 2 and len(lines) == 1 and "particle budget" in lines[0], ctl.stderr
+        assert "RuntimeWarning" not in served.stderr and "overflow" not in served.stderr
+
+
+LIVE_BODY_SCENE = """
+[scene]
+name = "yard"
+
+[[bodies]]
+name = "robot"
+trajectory = "live"
+
+[[objects]]
+name = "wall"
+box = { size = [0.2, 10.0, 2.0] }
+position = [5.0, 0.0, 1.0]
+
+[[sensors]]
+name = "urg"
+model = "urg-04lx"
+body = "robot"
+position = [0.0, 0.0, 0.5]
+endpoints = ["tcp:127.0.0.1:0"]
+"""
+
+
+def test_a_body_moved_faster_than_a_body_may_is_refused(tmp_path: Path) -> None:
+    scene = tmp_path / "yard.toml"
+    scene.write_text(LIVE_BODY_SCENE)
+    with ServeProcess(scene, ["urg=tcp:127.0.0.1:0"]) as served:
+        status, answer = request(served.control_url, "PUT", "/api/bodies/robot/pose", {"position": [1.0, 0.0, 0.0]})
+        assert status == 200, answer
+        far = [1.0 + 10 * MAX_BODY_SPEED_M_S, 0.0, 0.0]  # ten seconds' worth at the limit, within one
+        status, answer = request(served.control_url, "PUT", "/api/bodies/robot/pose", {"position": far})
+        assert status == 400 and f"at most {MAX_BODY_SPEED_M_S:g} m/s" in answer["error"], answer
+        assert answer["key"] == "bodies[robot].position"
+        assert _state(served)["bodies"]["robot"]["position"] == [1.0, 0.0, 0.0]
+
+
+def test_a_change_up_to_the_budget_keeps_scans_within_a_period() -> None:
+    """railway under the costlier `physical` preset, its plume raised live to the whole budget:
+    accepted, and the URG's scans keep coming at most one period late (no gap over two periods)."""
+    scene = load_scene("railway")
+    others = sum(plume.rate * plume.lifetime for plume in scene.plumes[1:])
+    full = (MAX_PARTICLES_ALIVE - others) / scene.plumes[0].lifetime
+    with ServeProcess("railway", ["urg=tcp:127.0.0.1:0"], extra_args=["--model", "physical"]) as served:
+        stream = UrgStream(served.endpoint("urg", "tcp").address)
+        try:
+            stream.read_for(2.0)
+            status, answer = request(served.control_url, "PATCH", f"/api/smoke/plumes/{scene.plumes[0].name}", {"rate": full})
+            assert status == 200, answer
+            stream.read_for(scene.plumes[0].lifetime)  # the plume fills to the budget
+            after = stream.read_for(10.0)
+        finally:
+            stream.close()
+    gaps, load = np.diff(after), os.getloadavg()[0]  # a machine with no core to spare makes any scan late
+    assert len(after) >= 90, f"{len(after)} scans in 10 s (load average {load:.1f})"
+    assert gaps.max() <= 2 * URG_PERIOD_S, f"a scan came {gaps.max() - URG_PERIOD_S:.3f} s late (load average {load:.1f})"
+
+
+def test_an_event_log_over_a_limit_is_refused_at_load(tmp_path: Path) -> None:
+    log = tmp_path / "session.jsonl"
+    lines = [
+        {"t": 1.0, "op": "plume", "name": "fire_debris", "rate": 8.0},
+        {"t": 2.0, "op": "plume", "name": "fire_debris", "rate": 100000.0},
+    ]
+    log.write_text("".join(json.dumps(line) + "\n" for line in lines))
+    commands = {
+        "serve": ["serve", "railway", "--endpoint", "urg=tcp:127.0.0.1:0", "--control", "off", "--view", "off"],
+        "record": ["record", "railway", "--sensor", "urg", "--end", "3", "--out", str(tmp_path / "x.log")],
+        "scan": ["scan", "railway", "--sensor", "urg", "--time", "3"],
+    }
+    for name, args in commands.items():
+        try:
+            result = subprocess.run([*serve_command(), *args, "--events-in", str(log)], cwd=tmp_path,
+                                    capture_output=True, text=True, timeout=60)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"{name} accepted an event log over the particle budget and ran on")
+        errors = result.stderr.strip().splitlines()
+        assert result.returncode == 2 and len(errors) == 1, (name, result.stderr[-2000:])
+        assert "session.jsonl: line 2" in errors[0] and "particle budget" in errors[0], (name, errors[0])
