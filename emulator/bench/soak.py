@@ -149,10 +149,32 @@ def _lms_start(client: RawClient) -> _LmsFramer:
     return _LmsFramer()
 
 
+class _ColaFramer:
+    """CoLa-A telegrams between STX and ETX; a scan is an `sSN LMDscandata` event."""
+
+    def __init__(self) -> None:
+        self._buffer = b""
+
+    def scans(self, data: bytes) -> int:
+        self._buffer += data
+        parts = self._buffer.split(b"\x03")
+        self._buffer = parts.pop()
+        return sum(1 for part in parts if part.lstrip(b"\x02").startswith(b"sSN LMDscandata"))
+
+
+def _cola_start(client: RawClient) -> _ColaFramer:
+    """The scan data event stream (sEN LMDscandata 1) in CoLa-A, at the unit's configured scan."""
+    client.send(b"\x02sEN LMDscandata 1\x03")
+    return _ColaFramer()
+
+
+Framer = _ScipFramer | _LmsFramer | _ColaFramer
+
 # protocol package → (a client's first words, after which it counts scans); a new protocol adds one entry
-STREAM_STARTS: dict[str, Callable[[RawClient], _ScipFramer | _LmsFramer]] = {
+STREAM_STARTS: dict[str, Callable[[RawClient], Framer]] = {
     "scip": _scip_start,
     "lms2xx": _lms_start,
+    "cola": _cola_start,
 }
 
 
@@ -175,7 +197,7 @@ class _Line:
     uri: str
     baud: int | None
 
-    def open(self) -> tuple[RawClient, _ScipFramer | _LmsFramer]:
+    def open(self) -> tuple[RawClient, Framer]:
         client = open_raw(self.uri, self.baud)
         try:
             return client, STREAM_STARTS[self.protocol](client)
@@ -190,7 +212,7 @@ class _Stream:
 
     line: _Line
     client: RawClient
-    framer: _ScipFramer | _LmsFramer
+    framer: Framer
     last: float | None = None
     gaps: list[float] = field(default_factory=list)
     reported: int = 0
