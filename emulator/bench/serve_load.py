@@ -323,7 +323,7 @@ UST_ROW = (8, "ust-10lx")  # one daemon, eight UST-10LX at 40 Hz: every scan on 
 def bench_section(quick: bool) -> tuple[dict, list[str]]:
     """`lrf-emulator bench --section serve`: N = 1, 10, 40 URGs under `physical`, 8 UST-10LX (40 Hz) under
     `physical`, then the moonshot (100 URGs + 20 LMS200 under `formsma2011`; not in a quick run: its
-    start-up alone takes ~10 s). Quick: 5 s each, else 30 s."""
+    start-up alone takes ~10 s), then the capacity curve (`capacity.py`). Quick: 5 s each, else 30 s."""
     duration = 5.0 if quick else 30.0
     rows = [measure_serve(count, duration) for count in (1, 10, 40)]
     count, hokuyo = UST_ROW
@@ -331,4 +331,7 @@ def bench_section(quick: bool) -> tuple[dict, list[str]]:
     if not quick:
         urgs, lms, model = MOONSHOT
         rows.append(measure_serve(urgs, duration, model=model, lms_count=lms))
-    return {"serve": rows}, table_lines(rows)
+    from emulator.bench.capacity import bench_curves  # the fleet past what its worker computes
+
+    curves, curve_lines = bench_curves(quick)
+    return {"serve": rows, **curves}, [*table_lines(rows), *curve_lines]

@@ -55,7 +55,9 @@ PREFETCH_LEAD_S = 0.07
 MAX_SPACING = 32
 # A spaced stream's batch spans at most this many strides per scan of a batch, so a spacing chosen once soon gives way to a newer one.
 MAX_BATCH_SPAN_STRIDES_PER_SCAN = 4
-DEMAND_GRACE_S = 0.2  # a stream's demand lapses this long (wall) after two of its scans failed to come
+# A stream's demand lapses this long (wall) after its last scan, or three spaced strides (its device
+# stopping the stream withdraws it at once).
+DEMAND_VALID_S = 2.0
 
 
 class ScanSource(Protocol):
@@ -395,7 +397,7 @@ class ScanCache:
     ) -> list[tuple[float, Future]]:
         """The instants a job computes, chosen as a worker takes it (on the pool's thread): of
         `entries` (time, cache key, future), those still held; of a `foreseen` job, not those its
-        device already passed, and of those already due only the newest, moved on to the stream's
+        device already passed, and of those due by the time it is done only the newest, moved on to the stream's
         current revolution if a later one has completed meanwhile (a device sends the freshest
         scan; computing an older one would be wasted), unless a job already sent computes that one
         or a later. The futures left out are cancelled (whoever waits for one looks again)."""
@@ -407,8 +409,10 @@ class ScanCache:
             kept = [entry for entry in kept if entry[1][0] > served]
             stride = self._strides.get(shape)
             if now is not None:
-                due = [entry for entry in kept if entry[0] <= now]
-                kept = [entry for entry in kept if entry[0] > now]
+                # due by the time the job is done (each instant takes a worker about `instant_cost_s`)
+                done_by = now + len(kept) * (getattr(self._executor, "instant_cost_s", None) or 0.0) * self._speed()
+                due = [entry for entry in kept if entry[0] <= done_by]
+                kept = [entry for entry in kept if entry[0] > done_by]
                 if due:
                     time_s, key, part = due[-1]
                     if stride is not None and time_s + stride <= now:
@@ -480,7 +484,7 @@ class ScanCache:
         demand = getattr(self._executor, "demand", None)
         if demand is not None:  # stated again at the stream's next scan, or it lapses (its client left)
             spacing = self._spacing.get(shape, 1.0)
-            demand((id(self), shape), self._speed() / stride, 2.0 * spacing * stride / self._speed() + DEMAND_GRACE_S)
+            demand((id(self), shape), self._speed() / stride, max(DEMAND_VALID_S, 3.0 * spacing * stride / self._speed()))
         spacing = self._spacing[shape] = min(MAX_SPACING, getattr(self._executor, "spacing", 1.0))
         return spacing
 

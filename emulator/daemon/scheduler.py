@@ -17,6 +17,7 @@ from __future__ import annotations
 import heapq
 import itertools
 import time
+from collections import deque
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -25,7 +26,7 @@ from typing import Any, Callable
 # it would compute is still wanted (its future is then cancelled).
 Prepare = Callable[[], tuple | None]
 
-COST_SMOOTHING = 0.2  # weight of the newest job in the running cost of an instant
+COST_WINDOW_S = 3.0  # an instant's cost: the workers' wall time over the instants they computed in this long
 # Spacing for 5 % more demand than measured: the daemon's loop and its clients share the cores.
 SPACING_HEADROOM = 1.05
 
@@ -46,7 +47,7 @@ class Scheduler:
         self._wall = wall
         self._waiting: list[_Waiting] = []  # a heap
         self._order = itertools.count()
-        self._instant_cost_s: float | None = None  # wall seconds a worker takes per instant (running mean)
+        self._computed: deque[tuple[float, float, int]] = deque()  # (finished at, wall s, instants) of recent jobs
         self._demand: dict[Any, tuple[float, float]] = {}  # stream → (instants per wall second, valid until)
 
     def __len__(self) -> int:
@@ -84,9 +85,17 @@ class Scheduler:
 
     def computed(self, instants: int, wall_s: float) -> None:
         """A worker computed `instants` in `wall_s` (from sending the job to its result)."""
-        cost = wall_s / max(1, instants)
-        previous = self._instant_cost_s
-        self._instant_cost_s = cost if previous is None else previous + COST_SMOOTHING * (cost - previous)
+        now = self._wall()
+        self._computed.append((now, wall_s, max(1, instants)))
+        while self._computed and self._computed[0][0] < now - COST_WINDOW_S:
+            self._computed.popleft()
+
+    @property
+    def instant_cost_s(self) -> float | None:
+        """Wall seconds a worker took per instant over the last COST_WINDOW_S (None before any job)."""
+        if not self._computed:
+            return None
+        return sum(wall for _, wall, _ in self._computed) / sum(instants for _, _, instants in self._computed)
 
     def demand(self, stream: Any, per_second: float, valid_s: float) -> None:
         """A stream wants `per_second` instants each wall second, for `valid_s` (wall) unless stated
@@ -97,7 +106,7 @@ class Scheduler:
     def spacing(self) -> float:
         """Every how many scans each stream should be computed so that the workers keep up
         (1 while they do; 1.5: two scans in three)."""
-        cost = self._instant_cost_s
+        cost = self.instant_cost_s
         if cost is None:
             return 1.0
         now = self._wall()

@@ -622,6 +622,8 @@ class Daemon:
             "late": sum(cache.late for cache in self.scan_caches.values()),
             "skipped": sum(cache.skipped for cache in self.scan_caches.values()),
             "jobs_waiting": self.pool.waiting if self.pool is not None else 0,
+            # every how many revolutions each stream is computed, in % (100: every one; the workers keep up)
+            "spacing_pct": round(100 * self.pool.spacing) if self.pool is not None else 100,
             "instants_dropped": sum(cache.dropped for cache in self.scan_caches.values()),
             "tasks": len(asyncio.all_tasks()),
             "fds": len(os.listdir("/proc/self/fd")),

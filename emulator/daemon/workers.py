@@ -54,6 +54,9 @@ MAX_ATTEMPTS = 2  # a job is sent to at most this many worker lives
 # processes a nice-19 worker gets ~1.5 % of a core and scans stall (an LMS200 ACK then waited for
 # its telegram's scan for up to 1.5 s), so the default is the daemon's own priority.
 WORKER_NICE = 0
+# Scan jobs a worker holds at once: the next one waits in its pipe, so the worker does not idle while
+# the daemon reads a result and prepares the next (on a busy machine the daemon itself waits for a core).
+JOBS_PER_WORKER = 2
 
 
 class ScanJobFailed(RuntimeError):
@@ -179,9 +182,12 @@ class _Worker:
     jobs: dict[int, _Job] = field(default_factory=dict)
     lives: int = 0
 
+    last_done: float = 0.0  # monotonic time its last scan job came back
+
     @property
-    def computing(self) -> bool:
-        return any(job.message[0] != "apply" for job in self.jobs.values())
+    def computing(self) -> int:
+        """Scan jobs sent to it and not yet back."""
+        return sum(job.message[0] != "apply" for job in self.jobs.values())
 
 
 class WorkerPool:
@@ -253,7 +259,7 @@ class WorkerPool:
     def idle(self) -> bool:
         """A worker is free and no job waits: a scan asked for now is computed at once."""
         with self._lock:
-            return not len(self._scheduler) and any(not worker.computing for worker in self._workers)
+            return not len(self._scheduler) and any(worker.computing < JOBS_PER_WORKER for worker in self._workers)
 
     def demand(self, stream: Any, per_second: float, valid_s: float) -> None:
         """A stream wants `per_second` instants each wall second (`Scheduler.demand`)."""
@@ -267,16 +273,22 @@ class WorkerPool:
             return self._scheduler.spacing
 
     @property
+    def instant_cost_s(self) -> float | None:
+        return self._scheduler.instant_cost_s
+
+    @property
     def waiting(self) -> int:
         """Scan jobs waiting for a free worker."""
         return len(self._scheduler)
 
     def _dispatch(self) -> None:
         """Hand the most urgent waiting jobs to the free workers (lock held)."""
-        free = [worker for worker in self._workers if not worker.computing and worker.connection is not None]
+        free = [worker for worker in self._workers if worker.computing < JOBS_PER_WORKER and worker.connection is not None]
         while free and (taken := self._scheduler.take()) is not None:
             message, future = taken
-            worker = free.pop()
+            worker = min(free, key=lambda candidate: candidate.computing)
+            if worker.computing + 1 >= JOBS_PER_WORKER:
+                free.remove(worker)
             job = next(self._job_ids)
             worker.jobs[job] = _Job((message[0], job, *message[1:]), future, sent_at=time.monotonic())
             self._send(worker, job)
@@ -369,7 +381,9 @@ class WorkerPool:
                 job = worker.jobs.pop(job_id, None)
                 if job is not None and kind == "done" and job.message[0] in ("scan", "scans"):
                     instants = 1 if job.message[0] == "scan" else len(job.message[3])
-                    self._scheduler.computed(instants, time.monotonic() - job.sent_at)
+                    done = time.monotonic()  # its worker's time on it: from when it was sent or the job before came back
+                    self._scheduler.computed(instants, done - max(job.sent_at, worker.last_done))
+                    worker.last_done = done
                 self._dispatch()  # this worker may be free: its next job goes out before this one is settled
             if job is None or job.future.cancelled():
                 continue
@@ -475,6 +489,12 @@ class WorkerExecutor(Executor):
     @property
     def spacing(self) -> float:
         return self._pool.spacing
+
+    @property
+    def instant_cost_s(self) -> float | None:
+        """What an instant costs a worker lately (wall s; read without the pool's lock: a job's
+        preparation asks for it while the pool holds it)."""
+        return self._pool.instant_cost_s
 
     def demand(self, stream: Any, per_second: float, valid_s: float) -> None:
         self._pool.demand(stream, per_second, valid_s)
