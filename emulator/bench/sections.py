@@ -50,7 +50,7 @@ from emulator.optics import World
 from emulator.scene import bundled_scenes, load_scene
 from emulator.scene.model import Scene, SensorSpec
 from emulator.scene.sick_models import MODELS as SICK_MODELS
-from emulator.sensors import Sensor, create_sensor, hokuyo_model, lms200, sick_cola
+from emulator.sensors import HOKUYO_MODELS, Sensor, create_sensor, hokuyo_model, lms200, sick_cola
 from emulator.sensors.beam_geometry import scan_plane_rays
 from emulator.sensors.mount import SensorMount
 from emulator.sensors.response import PRESET_MODULES, apply_model_override
@@ -79,7 +79,7 @@ def dense_plume_scene() -> Scene:
 
 
 HOKUYO_MOUNT_SCENES = ("rescue", "railway")
-SCIP22_MODELS = ("utm-30lx", "utm-30lx-ew", "ust-10lx", "ust-20lx")
+SCIP22_MODELS = tuple(name for name in HOKUYO_MODELS if name != "urg-04lx")
 
 
 def hokuyos_on_the_urgs_mount(scene: Scene) -> Scene:

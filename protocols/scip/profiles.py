@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from protocols.scip.encoding import checksum, encode_values
 
 VENDOR = "Hokuyo Automatic Co., Ltd."
-BASE_COMMANDS = frozenset({b"VV", b"PP", b"II", b"BM", b"QT", b"RS", b"RT", b"RB", b"TM", b"GD", b"GS", b"MD", b"MS"})
+BASE_COMMANDS = frozenset({b"VV", b"PP", b"II", b"BM", b"QT", b"RS", b"RT", b"RB", b"TM", b"SS", b"GD", b"GS", b"MD", b"MS"})
 STATE_COMMANDS = frozenset({b"%ST", b"%SL"})  # the UST's state query and sleep (UST protocol, via hokuyolx)
 INTENSITY_COMMANDS = frozenset({b"GE", b"ME"})
 MULTI_ECHO_COMMANDS = frozenset({b"HD", b"HE", b"ND", b"NE"})

@@ -43,11 +43,13 @@ SINGLE_SCAN = frozenset({b"GD", b"GS", b"GE", b"HD", b"HE"})
 STREAMING = frozenset({b"MD", b"MS", b"ME", b"ND", b"NE"})
 PARAMETER_CHARS = {
     **{code: 0 for code in (b"VV", b"PP", b"II", b"BM", b"QT", b"RS", b"RT", b"RB", b"%ST", b"%SL")},
-    b"TM": 1,
+    b"TM": 1, b"SS": 6,
     **{code: SCAN_PARAMETER_CHARS for code in SINGLE_SCAN},
     **{code: STREAM_PARAMETER_CHARS for code in STREAMING},
 }
 ADJUST_MODE_COMMANDS = frozenset({b"TM", b"RS", b"RT", b"RB", b"VV", b"PP", b"II", b"%ST"})
+BIT_RATES = frozenset({19200, 38400, 57600, 115200, 250000, 500000, 750000})
+DEFAULT_BIT_RATE = 115200
 REBOOT_CONFIRM_S = 1.0  # RB reboots when a second RB follows the first within a second
 # %ST: the state codes of the UST protocol (standby, time adjustment, single scan, multi scan, sleep)
 STANDBY, TIME_ADJUSTMENT, SINGLE_SCAN_STATE, MULTI_SCAN_STATE, SLEEP = b"000", b"002", b"003", b"004", b"005"
@@ -148,6 +150,7 @@ class Scip22Device:
         self._asleep = False
         self._stream: _Stream | None = None
         self._reboot_asked: float | None = None  # when the first RB came
+        self._bit_rate = DEFAULT_BIT_RATE  # a USB unit's SS setting: reported, never pacing the link
 
     # --- protocols.device.Device -------------------------------------------
 
@@ -288,9 +291,26 @@ class Scip22Device:
             return _reply(echo, b"00")
         if code == b"TM":
             return self._time_adjust(params, echo, now)
+        if code == b"SS":
+            return _reply(echo, self._set_bit_rate(params))
         if code in SINGLE_SCAN:
             return self._single_scan(code, params, echo, now)
         return self._start_stream(code, params, echo, tag_suffix, now)
+
+    def _set_bit_rate(self, params: bytes) -> bytes:
+        """SS: an Ethernet unit has no bit rate (0F, which urg_library takes as an Ethernet sensor's
+        answer); a USB unit accepts the serial rates as the URG-04LX does, without pacing its link."""
+        if self.profile.interface == "ethernet":
+            return b"0F"
+        if not params.isdigit():
+            return b"01"
+        rate = int(params)
+        if rate not in BIT_RATES:
+            return b"02"
+        if rate == self._bit_rate:
+            return b"03"
+        self._bit_rate = rate
+        return b"00"
 
     def _state_code(self) -> bytes:
         if self._adjust_mode:

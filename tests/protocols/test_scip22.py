@@ -340,3 +340,15 @@ def test_arbitrary_bytes_get_one_well_formed_reply_per_line(model, parts, cuts):
         assert reply.startswith(line + b"\n") and reply.endswith(b"\n\n")
         status = reply[len(line) + 1 :].split(b"\n")[0]
         assert len(status) == 3 and status[2] == sum_char(status[:2])
+
+
+def test_ss_sets_a_usb_units_rate_and_an_ethernet_unit_has_none():
+    """urg_library's change_sensor_baudrate expects 00, 03 or 04 over serial and takes 0F as an
+    Ethernet sensor's answer."""
+    usb = Scip22Device(flat(), "utm-30lx")
+    assert answer(usb, b"SS115200") == b"SS115200\n03S\n\n"
+    assert answer(usb, b"SS500000") == b"SS500000\n00P\n\n"
+    assert answer(usb, b"SS123456") == b"SS123456\n02R\n\n"
+    assert answer(usb, b"SS11520x") == b"SS11520x\n01Q\n\n"
+    assert usb.baud is None  # USB: never paced
+    assert answer(Scip22Device(flat(), "ust-10lx"), b"SS115200") == b"SS115200\n0Ff\n\n"
