@@ -42,6 +42,7 @@ class Scan:
     reflector: np.ndarray | None = None  # LMS200: the echo came from a retro-reflector (bool per value)
     # Scanners that report them (docs/scene-format.md): the intensity of each entry of `values` (N,);
     # every echo's wire value (N, E), nearest first, -1 where a beam has fewer than E; their intensities.
+    # A Hokuyo's first slot is always what ND sends for the step: its error code when nothing came back.
     intensities: np.ndarray | None = None
     echoes: np.ndarray | None = None
     echo_intensities: np.ndarray | None = None
