@@ -35,7 +35,7 @@ from protocols.scip.requests import SCAN_PARAMETER_CHARS, STREAM_PARAMETER_CHARS
 TIMER_MODULUS = 1 << 24
 MAX_TAG_CHARS = 16
 TAG_CHARS = frozenset(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789 ._+@")
-MAX_BACKLOG_SCANS = 10  # a poll that comes very late streams only the newest scans
+MAX_BACKLOG_SCANS = 1  # a poll that comes late (its host was behind) streams only the newest scan, as UrgDevice
 MAX_QUEUED_REPLIES = 32  # replies waiting for their scan; further lines are lost (bounded under a flood)
 _EPSILON_S = 1e-9
 
@@ -200,6 +200,11 @@ class Scip22Device:
     def scan_request(self) -> dict:
         """Nothing beyond the time: every step is measured; requests choose among them."""
         return {}
+
+    def scan_stride_s(self) -> float | None:
+        """The period of the stream running (None: none runs), so a daemon can batch it from its first scans."""
+        stream = self._stream
+        return None if stream is None else (stream.request.interval + 1) * self.profile.period_ms / 1000
 
     def connection_lost(self) -> None:
         """Streaming stops and unanswered commands are forgotten; the unit keeps its timer."""
@@ -387,6 +392,8 @@ class Scip22Device:
         latest = math.floor(((now - sweep) * 1000 - self._phase_ms) / self.profile.period_ms + _EPSILON_S)
         period = stream.request.interval + 1
         due = (latest - stream.next_index) // period + 1
+        if stream.remaining is not None:
+            due = min(due, stream.remaining)  # the last of N scans is the newest there will be
         self._skip(stream, max(due - MAX_BACKLOG_SCANS, 0))
         outputs = []
         while self._stream is stream and stream.next_index <= latest:

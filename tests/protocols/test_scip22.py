@@ -292,7 +292,9 @@ def test_md_streams_every_25_ms_with_counts_and_wrapping_stamps():
     start = 16777.200  # a sweep starts here; the timer counts from 16 ms
     device = Scip22Device(flat(), "ust-10lx", start_time=0.016)
     device.receive(b"MD0000108001003\n", start)
-    outputs = device.poll(start + 0.2)
+    outputs = []
+    while (deadline := device.next_deadline()) is not None:
+        outputs += device.poll(deadline)
     scans = [o for o in outputs if o.droppable]
     assert [read_reply(o.data)[0] for o in scans] == [b"MD0000108001002", b"MD0000108001001", b"MD0000108001000"]
     stamps = [read_reply(o.data)[2] for o in scans]
@@ -303,9 +305,21 @@ def test_md_streams_every_25_ms_with_counts_and_wrapping_stamps():
 def test_qt_ends_a_stream():
     device = Scip22Device(flat(), "ust-10lx")
     device.receive(b"ME0000108000000\n", 0.0)
-    assert len([o for o in device.poll(0.1) if o.droppable]) == 4
+    assert device.scan_stride_s() == 0.025
+    sent = [o for step in range(4) for o in device.poll(step * 0.025 + 0.019) if o.droppable]
+    assert len(sent) == 4
     device.receive(b"QT\n", 0.1)
-    assert device.poll(1.0) == [] and device.next_deadline() is None
+    assert device.poll(1.0) == [] and device.next_deadline() is None and device.scan_stride_s() is None
+
+
+def test_a_late_poll_sends_only_the_newest_scan():
+    """A host that fell behind gets the newest scan due, not a burst of old ones (skipped revolutions)."""
+    device = Scip22Device(flat(), "ust-10lx")
+    device.receive(b"MD0000108001005\n", 0.0)
+    [late] = [o for o in device.poll(0.080) if o.droppable]
+    echo, _, stamp, _ = read_reply(late.data)
+    assert (echo, stamp) == (b"MD0000108001002", 50)  # sweeps 0 and 25 skipped, two sent
+    assert [read_reply(o.data)[0] for o in device.poll(1.0) if o.droppable] == [b"MD0000108001000"]
 
 
 # --- fuzzing ------------------------------------------------------------------------------
