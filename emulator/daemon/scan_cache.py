@@ -139,6 +139,8 @@ class ScanCache:
         shape, tick = _request_key(request), round(time_s * TICKS_PER_S)
         future = self._futures.get(_cache_key(time_s, request))
         fresher = None if _ready(future) or self._now is None else self._freshest_ready(shape, tick)
+        if fresher is None and not _ready(future) and self._now is not None and self._behind():
+            fresher = self._newest_ready(shape, tick)  # a request read at once (`input_scan`): the newest there is
         if fresher is not None:  # behind: the freshest scan not yet sent, with its own time (not the one asked)
             self._follow_stream(time_s, request)
             future = fresher
@@ -171,6 +173,11 @@ class ScanCache:
         stride = self._strides.get(shape)
         if previous is not None and stride is not None and tick > previous:
             self.skipped += max(0, round((tick - previous) / (stride * TICKS_PER_S)) - 1)
+
+    def _newest_ready(self, shape: RequestKey, tick: int) -> Future | None:
+        """The newest computed scan of this request not after `tick`, even one already handed out."""
+        ready = [(key[0], future) for key, future in self._futures.items() if key[1:] == shape and key[0] <= tick and _ready(future)]
+        return max(ready, key=lambda pair: pair[0])[1] if ready else None
 
     def _freshest_ready(self, shape: RequestKey, tick: int) -> Future | None:
         """The newest computed scan of this request after the last one handed out and not after `tick`
@@ -222,6 +229,8 @@ class ScanCache:
         future = self._futures.get(key)
         if _ready(future) or (self._now is not None and self._freshest_ready(key[1:], key[0]) is not None):
             return None
+        if self._now is not None and self._behind() and self._newest_ready(key[1:], key[0]) is not None:
+            return None  # behind: the newest scan there is answers at once (an LMS200's ACK must not wait)
         if _held(future) and self._idle():  # under way, or waiting for its quiet moment
             self._start_now(future)
             return future
@@ -256,7 +265,10 @@ class ScanCache:
         shape = _request_key(request)
         if stride_s is None:
             if self._told_strides.pop(shape, None) is not None and hasattr(self._executor, "demand"):
-                self._executor.demand((id(self), shape), 0.0, 0.0)  # the stream stopped: its demand with it
+                self._executor.demand((id(self), shape), 0.0, 0.0)  # the stream stopped: its demand with it,
+                for key, future in list(self._futures.items()):  # and the scans foreseen for it that wait
+                    if key[1:] == shape and not future.done():
+                        future.cancel()
         else:
             self._told_strides[shape] = stride_s
 
