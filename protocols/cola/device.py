@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import functools
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -154,6 +155,10 @@ class ColaUnit:
         """The newest scan complete at `now` (0 before the first)."""
         return max(0, math.floor((now - self._epoch_s) / self.period_s + TIME_EPSILON_S))
 
+    def index_at(self, scan_time_s: float) -> int:
+        """The scan that completes at `scan_time_s`."""
+        return int(round((scan_time_s - self._epoch_s) / self.period_s))
+
     def scan_time(self, index: int) -> float:
         return self._epoch_s + index * self.period_s
 
@@ -188,6 +193,7 @@ class ColaUnit:
 class _Stream:
     dialect: Dialect
     next_index: int
+    last_sent: int = -1  # the newest scan index a telegram carried
 
 
 @dataclass
@@ -257,9 +263,12 @@ class ColaDevice:
         return self._reader.dropped
 
     def receive(self, data: bytes, now: float) -> list[Output]:
+        """Streamed scans due, then the answer to every whole telegram in `data`, in order, as one
+        output (a flood of thousands of requests is one write, not thousands)."""
         outputs = self.poll(now)
-        for telegram in self._reader.feed(data):
-            outputs.append(self._answer(telegram, now))
+        answers = [self._answer(telegram, now).data for telegram in self._reader.feed(data)]
+        if answers:
+            outputs.append(_output(b"".join(answers)))
         return outputs
 
     def poll(self, now: float) -> list[Output]:
@@ -277,7 +286,11 @@ class ColaDevice:
         first = -(-first // interval) * interval
         outputs = []
         for index in range(first, latest + 1, interval):
-            payload = b"sSN LMDscandata " + self._scandata(index, unit.scan_time(index), stream.dialect)
+            sent, values = self._scandata_values(index, unit.scan_time(index))
+            if sent <= stream.last_sent:
+                continue  # a daemon that is behind hands out the freshest scan it has: sent already
+            stream.last_sent = sent
+            payload = b"sSN LMDscandata " + encode(values, stream.dialect)
             outputs.append(_output(frame(payload, stream.dialect), droppable=True))
         stream.next_index = (latest // interval + 1) * interval
         return outputs
@@ -297,6 +310,12 @@ class ColaDevice:
 
     def scan_request(self) -> dict[str, Any]:
         return self.unit.scan_request()
+
+    def scan_stride_s(self) -> float | None:
+        """The period of the LMDscandata stream (None: not streaming), so a daemon batches it from its first scans."""
+        if self._session.stream is None or not self.unit.settings.measuring:
+            return None
+        return self.unit.period_s * max(1, self.unit.settings.interval)
 
     def connection_lost(self) -> None:
         """The client went away: streaming to it stops and its login ends; the unit's settings stay."""
@@ -330,7 +349,7 @@ class ColaDevice:
         return _output(frame(head + body, dialect))
 
     def _error(self, code: int, dialect: Dialect) -> Output:
-        return _output(frame(b"sFA " + encode([u16(code) if dialect is Dialect.BINARY else u8(code)], dialect), dialect))
+        return _error_output(code, dialect)
 
     def _method(self, now: float) -> int | None:
         """A method that needs the authorised client's level: None, or the error code."""
@@ -478,8 +497,7 @@ class ColaDevice:
         unit = self.unit
         if not unit.settings.measuring:
             return LOCAL_CONDITION_FAILED
-        index = unit.scan_index(now)
-        return self._scandata_values(index, now)
+        return self._scandata_values(unit.scan_index(now), now)[1]
 
     def _stream_scans(self, arguments: bytes, dialect: Dialect, now: float) -> list[Value] | int:
         (enable,) = decode(arguments, ("u8",), dialect)
@@ -493,14 +511,17 @@ class ColaDevice:
 
     # -- scan data ------------------------------------------------------------
 
-    def _scandata(self, index: int, now: float, dialect: Dialect) -> bytes:
-        return encode(self._scandata_values(index, now), dialect)
-
-    def _scandata_values(self, index: int, now: float) -> list[Value]:
+    def _scandata_values(self, index: int, now: float) -> tuple[int, list[Value]]:
+        """The telegram of scan `index` sent at `now`, and the index it carries: a scan source may hand
+        out another scan than the one asked (a daemon that is behind: its freshest), stamped with its own
+        time, and the telegram then carries that scan's counter and times."""
         unit = self.unit
         settings, model = unit.settings, unit.model
+        scan = self._scans(unit.scan_time(index), **unit.scan_request())
+        actual_s = getattr(scan, "time_s", None)
+        if actual_s is not None:
+            index = unit.index_at(actual_s)
         scan_time = unit.scan_time(index)
-        scan = self._scans(scan_time, **unit.scan_request())
         unit.telegram_counter += 1
         count = model.beam_count(settings.resolution_ticks)
         first = int(math.ceil((settings.output_start_ticks - model.start_ticks) / settings.resolution_ticks - 1e-9))
@@ -536,7 +557,7 @@ class ColaDevice:
             device_name=model.device_ident if settings.device_name else None,
             time=_clock(now - unit.power_on_s) if settings.time else None,
         )
-        return scandata_values(header, channels)
+        return index, scandata_values(header, channels)
 
 
 def _selected_echoes(scan: ScanValues, settings: Settings, model: UnitModel) -> tuple[np.ndarray, np.ndarray]:
@@ -574,6 +595,12 @@ def _argument_error(message: str, dialect: Dialect) -> int:
     if "does not fit" in message:
         return COLA_A_VALUE_OVERFLOW if dialect is Dialect.ASCII else LOCAL_CONDITION_FAILED
     return BUFFER_UNDERFLOW
+
+
+@functools.lru_cache(maxsize=64)
+def _error_output(code: int, dialect: Dialect) -> Output:
+    """The `sFA` answer with Sopas error `code` (hex in CoLa-A, a u16 in CoLa-B)."""
+    return _output(frame(b"sFA " + encode([u16(code) if dialect is Dialect.BINARY else u8(code)], dialect), dialect))
 
 
 def _output(data: bytes, droppable: bool = False) -> Output:

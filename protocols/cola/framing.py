@@ -56,60 +56,60 @@ class ColaReader:
         self._buffer.clear()
 
     def feed(self, data: bytes) -> list[Telegram]:
+        """The whole telegrams `data` completes, in order; what is left waits for more (read from an
+        offset and cut once, so thousands of telegrams in one chunk cost no quadratic copying)."""
         buffer = self._buffer
         buffer += data
         telegrams: list[Telegram] = []
+        at = 0
         while True:
-            start = buffer.find(STX)
+            start = buffer.find(STX, at)
             if start < 0:
-                buffer.clear()
-                return telegrams
-            del buffer[:start]
-            if len(buffer) < 4 and buffer == BINARY_START[: len(buffer)]:
-                return telegrams  # could still open a CoLa-B telegram
-            if buffer.startswith(BINARY_START):
-                if not self._binary(telegrams):
-                    return telegrams
-            elif not self._ascii(telegrams):
-                return telegrams
+                at = len(buffer)
+                break
+            at = start
+            if len(buffer) - at < 4 and buffer[at:] == BINARY_START[: len(buffer) - at]:
+                break  # could still open a CoLa-B telegram
+            taken = self._binary(at, telegrams) if buffer.startswith(BINARY_START, at) else self._ascii(at, telegrams)
+            if taken is None:
+                break
+            at = taken
+        del buffer[:at]
+        return telegrams
 
-    def _binary(self, telegrams: list[Telegram]) -> bool:
-        """One CoLa-B telegram off the buffer's head; False when it is not all here yet."""
+    def _binary(self, at: int, telegrams: list[Telegram]) -> int | None:
+        """The CoLa-B telegram at `at`: where the next byte to read is, None when it is not all here yet."""
         buffer = self._buffer
-        if len(buffer) < BINARY_HEADER:
-            return False
-        length = int.from_bytes(buffer[4:8], "big")
+        if len(buffer) - at < BINARY_HEADER:
+            return None
+        length = int.from_bytes(buffer[at + 4:at + 8], "big")
         if length > MAX_TELEGRAM:
             self.dropped += 1
-            del buffer[:BINARY_HEADER]
-            return True
-        end = BINARY_HEADER + length + 1
+            return at + BINARY_HEADER
+        end = at + BINARY_HEADER + length + 1
         if len(buffer) < end:
-            return False
-        payload = bytes(buffer[BINARY_HEADER:end - 1])
-        if checksum(payload) == buffer[end - 1] and payload:
+            return None
+        payload = bytes(buffer[at + BINARY_HEADER:end - 1])
+        if payload and checksum(payload) == buffer[end - 1]:
             telegrams.append(Telegram(Dialect.BINARY, payload))
         else:
             self.dropped += 1
-        del buffer[:end]
-        return True
+        return end
 
-    def _ascii(self, telegrams: list[Telegram]) -> bool:
-        """One CoLa-A telegram off the buffer's head; False when its ETX has not come yet."""
+    def _ascii(self, at: int, telegrams: list[Telegram]) -> int | None:
+        """The CoLa-A telegram at `at`: where the next byte to read is, None when its ETX has not come yet."""
         buffer = self._buffer
-        end = buffer.find(ETX, 1)
-        restart = buffer.find(STX, 1, end if end >= 0 else len(buffer))
+        end = buffer.find(ETX, at + 1)
+        restart = buffer.find(STX, at + 1, end if end >= 0 else len(buffer))
         if restart >= 0:
             self.dropped += 1
-            del buffer[:restart]
-            return True
+            return restart
         if end < 0:
-            if len(buffer) > MAX_TELEGRAM:
+            if len(buffer) - at > MAX_TELEGRAM:
                 self.dropped += 1
-                buffer.clear()
-            return False
-        payload = bytes(buffer[1:end])
-        del buffer[:end + 1]
+                return len(buffer)
+            return None
+        payload = bytes(buffer[at + 1:end])
         if payload:
             telegrams.append(Telegram(Dialect.ASCII, payload))
-        return True
+        return end + 1

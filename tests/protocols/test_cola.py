@@ -29,6 +29,7 @@ LMS5 = UnitModel("LMS5xx", "LMS5xx", "V1.90", "1234", -50000, 1850000, {2500: (1
 class FakeScan:
     echoes: np.ndarray
     echo_intensities: np.ndarray
+    time_s: float | None = None
 
 
 class Source:
@@ -46,7 +47,7 @@ class Source:
         if self.model.echoes > 1:
             echoes[::2, 1] = 2000 + np.arange(0, count, 2)
         powers = np.where(echoes >= 0, 0x1234, -1)
-        return FakeScan(echoes, powers)
+        return FakeScan(echoes, powers, time_s)
 
 
 def device(model: UnitModel = TIM) -> ColaDevice:
@@ -320,3 +321,20 @@ def test_streamed_telegrams_come_once_per_scan_in_the_dialect_asked():
     assert dev.next_deadline() == pytest.approx(23 / 15)
     dev.connection_lost()
     assert dev.next_deadline() is None
+
+
+def test_a_source_that_hands_out_its_freshest_scan_gets_it_stamped_as_itself_and_sent_once():
+    """A daemon that is behind hands a device the freshest scan it has, with that scan's own time."""
+    source = Source(TIM)
+
+    def behind(time_s: float, **request) -> FakeScan:
+        scan = source(time_s, **request)
+        scan.time_s = max(1 / 15, time_s - 2 / 15)  # two scans behind what was asked
+        return scan
+
+    dev = ColaDevice(behind, ColaUnit(TIM))
+    dev.receive(frame(b"sEN LMDscandata \x01", Dialect.BINARY), 0.01)
+    first = [decode_scandata(data[8:-1], Dialect.BINARY) for data in streamed(dev, 3 / 15 + 1e-6)]
+    assert [(f["scan"], f["transmission_us"]) for f in first] == [(1, round(1e6 / 15))]  # 2 and 3 gave scan 1 again
+    later = [decode_scandata(data[8:-1], Dialect.BINARY)["scan"] for data in streamed(dev, 5 / 15 + 1e-6)]
+    assert later == [2, 3]

@@ -64,6 +64,17 @@ def _answers(daemon: ServeProcess, model: str) -> bool:
         return client.ask(b"sRN SCdevicestate", timeout_s=3.0) == b"sRA SCdevicestate 1"
 
 
+def _wait_until_answering(daemon: ServeProcess, model: str, timeout_s: float = 10.0) -> bool:
+    """The unit answers a new client once the daemon has seen the last one go (one client at a time)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            return _answers(daemon, model)
+        except (OSError, TimeoutError):
+            time.sleep(0.05)
+    return False
+
+
 def _watcher(model: str) -> str:
     return "lms111" if model != "lms111" else "tim571"
 
@@ -126,7 +137,7 @@ def test_hostile_bytes_leave_every_cola_model_answering(served: ServeProcess, mo
         time.sleep(0.3)
     finally:
         watch.check()
-    assert _answers(served, model)
+    assert _wait_until_answering(served, model)
     assert rss_kib(served.pid) - rss_before < RSS_GROWTH_LIMIT_KIB
     assert "Traceback" not in served.stderr
 
@@ -156,6 +167,7 @@ def test_wrong_checksums_and_half_telegrams_are_dropped_and_the_next_is_answered
     half = open_raw(uri)
     half.send(b"\x02\x02\x02\x02\x00\x00\x00\x11sRN")  # a CoLa-B telegram waits for its 17 bytes...
     half.close()  # ...which a client that hangs up never sends: its half is gone with it
+    assert _wait_until_answering(served, "lms511")
     client = open_raw(uri)
     try:
         client.send(good[:-1] + bytes([good[-1] ^ 0x5A]) + b"\x02sRN SCdevi")
@@ -189,5 +201,5 @@ def test_a_client_that_stops_reading_costs_another_sensor_nothing(served: ServeP
             watch.check()
     finally:
         dead.close()
-    assert _answers(served, "lms511")
+    assert _wait_until_answering(served, "lms511")
     assert rss_kib(served.pid) - rss_before < RSS_GROWTH_LIMIT_KIB
