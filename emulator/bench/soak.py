@@ -261,7 +261,7 @@ class Soak:
         self.steady: list[_Stream] = []
         self.churn_lines: list[_Line] = []
         self.samples: list[dict] = []
-        self.churned = {"serial": 0, "websocket": 0, "failed": 0}
+        self.churned = {"serial": 0, "websocket": 0, "failed": 0, "view_reconnects": 0}
         self.changes = {"accepted": 0, "refused": 0}
         self._quiet = threading.Lock()  # held by the sampler: no churning client connects meanwhile
         self._sampling = threading.Event()  # the sampler waits for the lock: churn lets it have it
@@ -366,12 +366,14 @@ class Soak:
             self.churned["failed"] += 1
 
     def _watch_views(self) -> None:
-        """A browser's part: a WebSocket open on each daemon's view, read, reopened every few minutes."""
+        """A browser's part: a WebSocket open on each daemon's view, read, reopened every few minutes
+        (and at once if the view closed it: `view_reconnects` counts those)."""
         urls = [daemon.serve.service("view") for daemon in self.daemons]
         while not self._stop.is_set():
             try:
                 asyncio.run(_watch(urls, min(300.0, self.duration_s / 4), self._stop))
             except (OSError, RuntimeError, asyncio.TimeoutError):
+                self.churned["view_reconnects"] += 1
                 time.sleep(1.0)
 
     def _drive(self) -> None:
@@ -521,7 +523,10 @@ async def _watch(urls: list[str], seconds: float, stop: threading.Event) -> None
         try:
             end = time.monotonic() + seconds
             while time.monotonic() < end and not stop.is_set():
-                await asyncio.gather(*(_drain(socket_, 0.5) for socket_ in sockets))
+                outcomes = await asyncio.gather(*(_drain(socket_, 0.5) for socket_ in sockets), return_exceptions=True)
+                for outcome in outcomes:
+                    if isinstance(outcome, BaseException):
+                        raise outcome
         finally:
             for socket_ in sockets:
                 await socket_.close()
@@ -586,7 +591,8 @@ def soak_section(quick: bool, minutes: float | None = None) -> tuple[dict, list[
     lines = [
         f"soak: {data['minutes']:g} min of {', '.join(data['scenes'])} ({', '.join(data['models'])}); streams that stay:"
         f" {', '.join(data['streams'])}; churn: {data['churned']['serial']} serial and {data['churned']['websocket']}"
-        f" WebSocket clients came and vanished ({data['churned']['failed']} failed to connect); live changes:"
+        f" WebSocket clients came and vanished ({data['churned']['failed']} failed to connect); the view's watcher"
+        f" reconnected {data['churned']['view_reconnects']} times after the view closed it; live changes:"
         f" {data['changes']['accepted']} accepted, {data['changes']['refused']} refused; view watched, MCAP on",
         SAMPLE_HEADER,
         *(sample_line(sample) for sample in data["samples"]),
