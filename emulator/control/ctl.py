@@ -11,6 +11,8 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import os
+import sys
 import urllib.error
 import urllib.parse
 import urllib.request
@@ -90,7 +92,11 @@ class ControlClient:
                         if data.get("type") == "error":
                             raise UserError(f"{data.get('status')}: {data.get('error')}")
                         if data.get("type") == "scan":
-                            out(scan_line(data))
+                            try:
+                                out(scan_line(data))
+                            except BrokenPipeError:  # the reader went away (`ctl watch | head`): stop quietly
+                                _quiet_stdout()
+                                return
                             seen += 1
                             if count is not None and seen >= count:
                                 return
@@ -98,6 +104,13 @@ class ControlClient:
             raise UserError(f"{error.status}: {error.message}") from None
         except (aiohttp.ClientError, OSError) as error:
             raise UserError(f"cannot reach the control API at {self.url}: {error}") from None
+
+
+def _quiet_stdout() -> None:
+    """Point stdout at /dev/null, so flushing it at exit raises no second BrokenPipeError."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
 
 
 def checked_url(url: str) -> str:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import shlex
 import socket
 import subprocess
 import time
@@ -332,6 +333,11 @@ def test_ctl_says_what_went_wrong_in_one_line_and_exits_2(daemon: ServeProcess) 
     watched = ctl("clock", "--resume"), ctl("watch", "lms", "--count", "2")
     assert watched[1].returncode == 0 and len(watched[1].stdout.splitlines()) == 2
     assert " lms " in watched[1].stdout.splitlines()[0]
+    piped = subprocess.run(  # its reader goes away after one line: a quiet stop, as Unix tools do
+        f"{shlex.join([*serve_command(), 'ctl', '--url', daemon.control_url, 'watch', 'lms'])} | head -n 1",
+        shell=True, capture_output=True, text=True, timeout=30,
+    )
+    assert len(piped.stdout.splitlines()) == 1 and piped.stderr == "", piped.stderr
 
 
 def test_a_fleet_daemon_refuses_scans_of_sensors_it_does_not_serve(room: Path) -> None:
