@@ -99,3 +99,16 @@ def test_image_gets_every_file_pip_install_needs() -> None:
     ignored = {line.strip() for line in (ROOT / ".dockerignore").read_text().splitlines()
                if line.strip() and not line.startswith("#")}
     assert not needed & ignored
+
+
+def test_every_package_folder_is_installed():
+    """A non-editable install (the image's `pip install .`) ships only the listed packages: a folder
+    with an __init__.py left out of the list imports in the tree but not in the image."""
+    setuptools = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]
+    on_disk = {
+        ".".join(init.parent.relative_to(ROOT).parts)
+        for top in ("emulator", "protocols")
+        for init in (ROOT / top).rglob("__init__.py")
+    }
+    missing = on_disk - set(setuptools["packages"])
+    assert not missing, f"package folders not listed in pyproject.toml: {sorted(missing)}"
