@@ -17,7 +17,7 @@ import numpy as np
 
 from protocols.device import Output
 from protocols.scip import scip1
-from protocols.scip.encoding import checksum, cluster_minimum, data_lines, encode_values
+from protocols.scip.encoding import cluster_minimum, data_lines, encode_values
 from protocols.scip.framing import Line, LineSplitter
 from protocols.scip.identity import (
     DEFAULT_BIT_RATE,
@@ -33,15 +33,21 @@ from protocols.scip.requests import (
     ScanRequest,
     parse_scan_request,
 )
+from protocols.scip.streaming import (
+    BIT_RATES,
+    EPSILON_S,
+    MAX_TAG_CHARS,
+    TAG_CHARS,
+    StreamingDevice,
+    checked_line,
+    frame,
+    milliseconds,
+)
 
 SCANS_PER_SECOND = 10  # 600 rpm: scan k completes at k / 10 s
-TIMER_MODULUS = 1 << 24  # the 24-bit millisecond timer
-MAX_BACKLOG_SCANS = 1  # a poll that comes late (its host was behind) streams only the newest scan: skipped revolutions, never a burst
-BIT_RATES = frozenset({19200, 38400, 57600, 115200, 250000, 500000, 750000})
+PERIOD_MS = 1000 // SCANS_PER_SECOND
 MAX_SPEED_LEVEL = 10
 DEFAULT_SPEED_CODE = 99  # CR99: back to the initial speed, like CR00
-MAX_TAG_CHARS = 16
-TAG_CHARS = frozenset(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789 ._+@")
 BOOT_PROTOCOLS = ("scip2", "scip1")
 TIMINGS = ("real", "fast")
 # The capture: a revolution's measurement starts ~6 ms after the cycle point at which
@@ -52,7 +58,6 @@ MEASUREMENT_START_S = 0.006
 # replies overruns the unit's input buffer; further lines are lost (bounded memory and
 # work under a flood).
 MAX_QUEUED_COMMANDS = 32
-_EPSILON_S = 1e-9
 
 # command → parameter characters before the optional ;tag
 PARAMETER_CHARS = {
@@ -78,18 +83,6 @@ class DeviceScan(Protocol):
 ScanSource = Callable[[float], DeviceScan]
 
 
-@dataclass
-class _Stream:
-    """An MD/MS in progress."""
-
-    command: bytes  # b"MD" or b"MS"
-    request: ScanRequest
-    echo_prefix: bytes  # the command and parameters as received, up to the count
-    tag_suffix: bytes  # b"" or b";" + tag, echoed on every scan
-    next_index: int  # scan index of the next message
-    remaining: int | None  # None while unlimited
-
-
 @dataclass(frozen=True)
 class _Command:
     """A line waiting for the command cycle that handles it."""
@@ -107,7 +100,7 @@ class _ScanReply:
     build: Callable[[], bytes]
 
 
-class UrgDevice:
+class UrgDevice(StreamingDevice):
     """One endpoint's virtual URG-04LX, across the clients that connect to it.
 
     `scan_source(t)` returns the scan completed at grid time t = phase + k / 10 s.
@@ -140,15 +133,16 @@ class UrgDevice:
             raise ValueError(f"boot_protocol must be one of {BOOT_PROTOCOLS}, got {boot_protocol!r}")
         if timing not in TIMINGS:
             raise ValueError(f"timing must be one of {TIMINGS}, got {timing!r}")
-        if not 0 <= phase_ms < 1000 // SCANS_PER_SECOND:
-            raise ValueError(f"phase_ms must be 0..{1000 // SCANS_PER_SECOND - 1}, got {phase_ms}")
+        if not 0 <= phase_ms < PERIOD_MS:
+            raise ValueError(f"phase_ms must be 0..{PERIOD_MS - 1}, got {phase_ms}")
         self._scan_source = scan_source
+        self._period_ms = PERIOD_MS
         self._phase_ms = phase_ms
         self._phase_s = phase_ms / 1000
         self._serial = serial
         self._boot_protocol = boot_protocol
         self._fast = timing == "fast"
-        self._epoch_ms = _milliseconds(start_time)
+        self._epoch_ms = milliseconds(start_time)
         self._lines = LineSplitter()
         self._queue: deque[_Command | _ScanReply] = deque()
         self._handled_until = -math.inf  # replies leave in command order
@@ -179,7 +173,7 @@ class UrgDevice:
         completed there, so a QT there ends the stream without one more scan after
         its reply; a fast command goes after the scans already due when it arrives."""
         outputs = []
-        while self._queue and self._queue[0].due <= now + _EPSILON_S:
+        while self._queue and self._queue[0].due <= now + EPSILON_S:
             item = self._queue.popleft()
             at = max(item.due, self._handled_until)
             self._handled_until = at
@@ -215,7 +209,7 @@ class UrgDevice:
         """With fast timing, the scan a GD/GS received at `now` reads at once: a daemon
         computes it before handing the bytes over, so that answering never waits on a
         computation (with real timing a GD waits for a later scan, a deadline of its own)."""
-        return self._scan_time(self._latest_revolution(now)) if self._fast else None
+        return self._scan_time(self._latest_index(now)) if self._fast else None
 
     def connection_lost(self) -> None:
         """Streaming stops and unanswered commands are forgotten; the unit keeps
@@ -243,7 +237,7 @@ class UrgDevice:
         self._protocol = self._boot_protocol
         self._laser_on = False
         self._adjust_mode = False
-        self._stream: _Stream | None = None
+        self._stream = None
         self._speed_level = 0
         self._bit_rate = DEFAULT_BIT_RATE
         self._high_sensitivity = False
@@ -253,25 +247,8 @@ class UrgDevice:
         stream = self._stream
         if stream is None:
             return []
-        latest = self._latest_revolution(now) - (before and _on_grid(now - self._phase_s))
-        if stream.next_index > latest:
-            return []
-        period = stream.request.interval + 1
-        due = (latest - stream.next_index) // period + 1
-        if stream.remaining is not None:
-            due = min(due, stream.remaining)  # the last of N scans is the newest there will be
-        self._skip(stream, max(due - MAX_BACKLOG_SCANS, 0))
-        outputs = []
-        while self._stream is stream and stream.next_index <= latest:
-            outputs.append(Output(self._stream_message(stream), droppable=True))
-        return outputs
-
-    def _timer_ms(self, now: float) -> int:
-        return (_milliseconds(now) - self._epoch_ms) % TIMER_MODULUS
-
-    def _stamp(self, scan: DeviceScan) -> bytes:
-        stamp = (int(scan.timestamp_ms) - self._epoch_ms) % TIMER_MODULUS
-        return _checked(encode_values(np.array([stamp]), 4))
+        latest = self._latest_index(now) - (before and _on_grid(now - self._phase_s))
+        return [Output(message, droppable=True) for _, message in self._stream_through(latest)]
 
     # --- dispatch ---------------------------------------------------------------
 
@@ -279,56 +256,56 @@ class UrgDevice:
         if self._protocol == "scip1":
             return self._scip1_reply(line, now)
         if line.overlong:
-            return _reply(line.text, b"0B")
+            return frame(line.text, b"0B")
         command, _, tag = line.text.partition(b";")
         code, params = command[:2], command[2:]
         has_tag = b";" in line.text
         if code not in PARAMETER_CHARS:
-            return _reply(line.text, b"0E")
+            return frame(line.text, b"0E")
         if has_tag and len(tag) > MAX_TAG_CHARS:
-            return _reply(line.text, b"0G")
+            return frame(line.text, b"0G")
         if has_tag and not TAG_CHARS.issuperset(tag):
-            return _reply(line.text, b"0H")
+            return frame(line.text, b"0H")
         if self._adjust_mode and code not in ADJUST_MODE_COMMANDS:
-            return _reply(line.text, b"0E")
+            return frame(line.text, b"0E")
         expected = PARAMETER_CHARS[code]
         if len(params) < expected:
-            return _reply(line.text, b"0C")
+            return frame(line.text, b"0C")
         if len(params) > expected:
-            return _reply(line.text, b"0D")
+            return frame(line.text, b"0D")
         return self._execute(code, params, line.text, b";" + tag if has_tag else b"", now, received)
 
     def _execute(
         self, code: bytes, params: bytes, echo: bytes, tag_suffix: bytes, now: float, received: float
     ) -> bytes | _ScanReply:
         if code == b"VV":
-            return _reply(echo, b"00", version_body(self._serial))
+            return frame(echo, b"00", version_body(self._serial))
         if code == b"PP":
-            return _reply(echo, b"00", parameter_body())
+            return frame(echo, b"00", parameter_body())
         if code == b"II":
             state = LiveState(self._laser_on, self._speed_level, self._bit_rate, self._timer_ms(now))
-            return _reply(echo, b"00", status_body(state))
+            return frame(echo, b"00", status_body(state))
         if code == b"BM":
             if self._laser_on:
-                return _reply(echo, b"02")
+                return frame(echo, b"02")
             self._laser_on = True
-            return _reply(echo, b"00")
+            return frame(echo, b"00")
         if code == b"QT":
             self._stream, self._laser_on = None, False
-            return _reply(echo, b"00")
+            return frame(echo, b"00")
         if code == b"RS":
             self._power_on_settings()
             self._protocol = "scip2"  # drivers send RS right after SCIP2.0 and expect to stay in 2.0
-            self._epoch_ms = _milliseconds(now)
-            return _reply(echo, b"00")
+            self._epoch_ms = milliseconds(now)
+            return frame(echo, b"00")
         if code == b"TM":
             return self._time_adjust(params, echo, now)
         if code == b"SS":
-            return _reply(echo, self._set_bit_rate(params))
+            return frame(echo, self._set_bit_rate(params))
         if code == b"CR":
-            return _reply(echo, self._set_speed(params))
+            return frame(echo, self._set_speed(params))
         if code == b"HS":
-            return _reply(echo, self._set_sensitivity(params))
+            return frame(echo, self._set_sensitivity(params))
         if code in (b"GD", b"GS"):
             return self._fresh_scan(code, params, echo, now, received)
         return self._start_stream(code, params, echo, tag_suffix, now)
@@ -338,19 +315,19 @@ class UrgDevice:
     def _time_adjust(self, params: bytes, echo: bytes, now: float) -> bytes:
         if params == b"0":
             if self._adjust_mode:
-                return _reply(echo, b"02")
+                return frame(echo, b"02")
             self._adjust_mode, self._laser_on, self._stream = True, False, None
-            return _reply(echo, b"00")
+            return frame(echo, b"00")
         if params == b"1":
             if not self._adjust_mode:
-                return _reply(echo, b"04")
-            return _reply(echo, b"00", _checked(encode_values(np.array([self._timer_ms(now)]), 4)))
+                return frame(echo, b"04")
+            return frame(echo, b"00", checked_line(encode_values(np.array([self._timer_ms(now)]), 4)))
         if params == b"2":
             if not self._adjust_mode:
-                return _reply(echo, b"03")
+                return frame(echo, b"03")
             self._adjust_mode = False
-            return _reply(echo, b"00")
-        return _reply(echo, b"01")
+            return frame(echo, b"00")
+        return frame(echo, b"01")
 
     def _set_bit_rate(self, params: bytes) -> bytes:
         if not params.isdigit():
@@ -391,75 +368,36 @@ class UrgDevice:
         real timing, the first revolution whose measurement starts after the command."""
         request = parse_scan_request(params, streaming=False)
         if isinstance(request, bytes):
-            return _reply(echo, request)
+            return frame(echo, request)
         if not self._laser_on:
-            return _reply(echo, b"10")
+            return frame(echo, b"10")
         if self._fast:
-            index = self._latest_revolution(now)
+            index = self._latest_index(now)
         else:
             measured_from = received - self._phase_s - MEASUREMENT_START_S
-            index = math.ceil(measured_from * SCANS_PER_SECOND - _EPSILON_S) + 1
-        first_after_reset = (self._epoch_ms - self._phase_ms) // (1000 // SCANS_PER_SECOND) + 1
+            index = math.ceil(measured_from * SCANS_PER_SECOND - EPSILON_S) + 1
+        first_after_reset = (self._epoch_ms - self._phase_ms) // PERIOD_MS + 1
         index = max(index, self._last_polled_scan + 1, first_after_reset)
         self._last_polled_scan = index
-        width = VALUE_CHARS[code]
 
         def build() -> bytes:
-            return _reply(echo, b"00", self._scan_body(self._scan_at(index), request, width))
+            return frame(echo, b"00", self._scan_body(self._scan_at(index), request, code))
 
         due = self._scan_time(index)
-        return build() if due <= now + _EPSILON_S else _ScanReply(due, build)
+        return build() if due <= now + EPSILON_S else _ScanReply(due, build)
 
     def _start_stream(self, code: bytes, params: bytes, echo: bytes, tag_suffix: bytes, now: float) -> bytes:
         request = parse_scan_request(params, streaming=True)
         if isinstance(request, bytes):
-            return _reply(echo, request)
-        self._laser_on = True
-        self._stream = _Stream(
-            command=code,
-            request=request,
-            echo_prefix=code + params[:-2],
-            tag_suffix=tag_suffix,
-            next_index=_first_scan_after(now - self._phase_s),
-            remaining=request.count or None,
-        )
-        return _reply(echo, b"00")
+            return frame(echo, request)
+        self._new_stream(code, params, tag_suffix, request, _first_scan_after(now - self._phase_s))
+        return frame(echo, b"00")
 
-    # --- streaming ----------------------------------------------------------------
+    # --- scans ---------------------------------------------------------------------
 
-    def _stream_message(self, stream: _Stream) -> bytes:
-        """The next scan message; advances (and maybe ends) the stream."""
-        scan = self._scan_at(stream.next_index)
-        remaining = 0 if stream.remaining is None else stream.remaining - 1
-        echo = stream.echo_prefix + b"%02d" % remaining + stream.tag_suffix
-        message = _reply(echo, b"99", self._scan_body(scan, stream.request, VALUE_CHARS[stream.command]))
-        self._skip(stream, 1)
-        return message
-
-    def _skip(self, stream: _Stream, scans: int) -> None:
-        """Count `scans` as sent; after the last of N, the laser goes off."""
-        if scans == 0:
-            return
-        stream.next_index += scans * (stream.request.interval + 1)
-        if stream.remaining is not None:
-            stream.remaining -= scans
-            if stream.remaining <= 0:
-                self._stream, self._laser_on = None, False
-
-    def _latest_revolution(self, now: float) -> int:
-        """Index of this unit's last revolution completed at `now` (its phase taken into account)."""
-        return _latest_scan_index(now - self._phase_s)
-
-    def _scan_time(self, index: int) -> float:
-        """When revolution `index` completes (simulated s): a whole millisecond, so its stamp is exact."""
-        return (index * (1000 // SCANS_PER_SECOND) + self._phase_ms) / 1000
-
-    def _scan_at(self, index: int) -> DeviceScan:
-        return self._scan_source(self._scan_time(index))
-
-    def _scan_body(self, scan: DeviceScan, request: ScanRequest, width: int) -> bytes:
+    def _scan_body(self, scan: DeviceScan, request: ScanRequest, command: bytes) -> bytes:
         values = cluster_minimum(np.asarray(scan.values)[request.start : request.end + 1], request.cluster)
-        return self._stamp(scan) + data_lines(encode_values(values, width))
+        return self._stamp_line(int(scan.timestamp_ms)) + data_lines(encode_values(values, VALUE_CHARS[command]))
 
     # --- SCIP 1.1 -----------------------------------------------------------------
 
@@ -470,28 +408,8 @@ class UrgDevice:
             self._protocol = "scip2"
             return scip1.SWITCH_REPLY
         return scip1.reply(
-            line.text, lambda: np.asarray(self._scan_at(self._latest_revolution(now)).values), self._serial
+            line.text, lambda: np.asarray(self._scan_at(self._latest_index(now)).values), self._serial
         )
-
-
-def _reply(echo: bytes, status: bytes, body: bytes = b"") -> bytes:
-    """Echo, status with its sum, body lines, and the closing empty line."""
-    return echo + b"\n" + status + checksum(status) + b"\n" + body + b"\n"
-
-
-def _checked(text: bytes) -> bytes:
-    """One line: text, its sum, LF."""
-    return text + checksum(text) + b"\n"
-
-
-def _milliseconds(seconds: float) -> int:
-    """Whole milliseconds elapsed; the epsilon absorbs float noise (0.3 * 1000 = 299.99…)."""
-    return math.floor(seconds * 1000 + 1e-6)
-
-
-def _latest_scan_index(now: float) -> int:
-    """Index k of the last scan completed at `now` (k / 10 <= now)."""
-    return math.floor(now * SCANS_PER_SECOND + 1e-9)
 
 
 def _on_grid(now: float) -> bool:
@@ -502,7 +420,7 @@ def _on_grid(now: float) -> bool:
 def _next_cycle_point(now: float) -> float:
     """The first command cycle point at or after `now`: the unit handles commands
     once per revolution, at the scan grid k / 10 s."""
-    return math.ceil(now * SCANS_PER_SECOND - _EPSILON_S) / SCANS_PER_SECOND
+    return math.ceil(now * SCANS_PER_SECOND - EPSILON_S) / SCANS_PER_SECOND
 
 
 def _first_scan_after(now: float) -> int:

@@ -27,17 +27,22 @@ from typing import Protocol
 import numpy as np
 
 from protocols.device import Output
-from protocols.scip.encoding import checksum, cluster_choice, data_lines, encode_steps, encode_values
+from protocols.scip.encoding import cluster_choice, data_lines, encode_steps, encode_values
 from protocols.scip.framing import Line, LineSplitter
 from protocols.scip.profiles import PROFILES, ScipProfile
 from protocols.scip.requests import SCAN_PARAMETER_CHARS, STREAM_PARAMETER_CHARS, ScanRequest, parse_scan_request
+from protocols.scip.streaming import (
+    BIT_RATES,
+    EPSILON_S,
+    MAX_TAG_CHARS,
+    TAG_CHARS,
+    StreamingDevice,
+    checked_line,
+    frame,
+    milliseconds,
+)
 
-TIMER_MODULUS = 1 << 24
-MAX_TAG_CHARS = 16
-TAG_CHARS = frozenset(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789 ._+@")
-MAX_BACKLOG_SCANS = 1  # a poll that comes late (its host was behind) streams only the newest scan, as UrgDevice
 MAX_QUEUED_REPLIES = 32  # replies waiting for their scan; further lines are lost (bounded under a flood)
-_EPSILON_S = 1e-9
 
 SINGLE_SCAN = frozenset({b"GD", b"GS", b"GE", b"HD", b"HE"})
 STREAMING = frozenset({b"MD", b"MS", b"ME", b"ND", b"NE"})
@@ -48,7 +53,6 @@ PARAMETER_CHARS = {
     **{code: STREAM_PARAMETER_CHARS for code in STREAMING},
 }
 ADJUST_MODE_COMMANDS = frozenset({b"TM", b"RS", b"RT", b"RB", b"VV", b"PP", b"II", b"%ST"})
-BIT_RATES = frozenset({19200, 38400, 57600, 115200, 250000, 500000, 750000})
 DEFAULT_BIT_RATE = 115200
 REBOOT_CONFIRM_S = 1.0  # RB reboots when a second RB follows the first within a second
 # %ST: the state codes of the UST protocol (standby, time adjustment, single scan, multi scan, sleep)
@@ -96,16 +100,6 @@ FORMATS = {
 }  # fmt: skip
 
 
-@dataclass
-class _Stream:
-    command: bytes
-    request: ScanRequest
-    echo_prefix: bytes  # the command and parameters as received, up to the count
-    tag_suffix: bytes
-    next_index: int
-    remaining: int | None  # None while unlimited
-
-
 @dataclass(frozen=True)
 class _Pending:
     """A reply held until `due` (a single scan's data leave when the mirror has swept them)."""
@@ -115,7 +109,7 @@ class _Pending:
     build: Callable[[], bytes]
 
 
-class Scip22Device:
+class Scip22Device(StreamingDevice):
     """One endpoint's virtual SCIP 2.2 Hokuyo, across the clients that connect to it.
 
     `scan_source(t)` returns the scan whose sweep starts at t = phase + k · period
@@ -138,9 +132,10 @@ class Scip22Device:
         if not 0 <= phase_ms < self.profile.period_ms:
             raise ValueError(f"phase_ms must be 0..{self.profile.period_ms - 1}, got {phase_ms}")
         self._scan_source = scan_source
+        self._period_ms = self.profile.period_ms
         self._phase_ms = phase_ms
         self._serial = serial or self.profile.default_serial
-        self._epoch_ms = _milliseconds(start_time)
+        self._epoch_ms = milliseconds(start_time)
         self._lines = LineSplitter()
         self._pending: deque[_Pending] = deque()
         self._last_single_scan = -1  # a GD reports a scan no earlier GD reported
@@ -148,7 +143,7 @@ class Scip22Device:
         self._laser_on = False
         self._adjust_mode = False
         self._asleep = False
-        self._stream: _Stream | None = None
+        self._stream = None
         self._reboot_asked: float | None = None  # when the first RB came
         self._bit_rate = DEFAULT_BIT_RATE  # a USB unit's SS setting: reported, never pacing the link
 
@@ -177,7 +172,7 @@ class Scip22Device:
     def poll(self, now: float) -> list[Output]:
         """Replies and streamed scans whose data have left by `now`, in time order."""
         outputs: list[tuple[float, int, Output]] = []
-        while self._pending and self._pending[0].due <= now + _EPSILON_S:
+        while self._pending and self._pending[0].due <= now + EPSILON_S:
             item = self._pending.popleft()
             outputs.append((item.due, len(outputs), Output(item.build())))
         outputs += [(due, len(outputs) + i, output) for i, (due, output) in enumerate(self._stream_until(now))]
@@ -219,10 +214,6 @@ class Scip22Device:
 
     # --- timing ----------------------------------------------------------------
 
-    def _scan_time(self, index: int) -> float:
-        """When scan `index`'s sweep starts (a whole millisecond: its stamp)."""
-        return (index * self.profile.period_ms + self._phase_ms) / 1000
-
     def _departure(self, index: int, request: ScanRequest) -> float:
         """When the mirror has swept the request's last step of scan `index`."""
         sweep = self.profile.period_ms * request.end / self.profile.steps_per_turn / 1000
@@ -230,74 +221,71 @@ class Scip22Device:
 
     def _first_scan_from(self, now: float) -> int:
         """The first scan whose sweep starts at or after `now`."""
-        return math.ceil(((now * 1000) - self._phase_ms) / self.profile.period_ms - _EPSILON_S)
-
-    def _timer_ms(self, now: float) -> int:
-        return (_milliseconds(now) - self._epoch_ms) % TIMER_MODULUS
+        return math.ceil(((now * 1000) - self._phase_ms) / self.profile.period_ms - EPSILON_S)
 
     # --- dispatch ----------------------------------------------------------------
 
     def _reply(self, line: Line, now: float) -> bytes | _Pending:
         if line.overlong:
-            return _reply(line.text, b"0B")
+            return frame(line.text, b"0B")
         command, _, tag = line.text.partition(b";")
         length = 3 if command.startswith(b"%") else 2
         code, params = command[:length], command[length:]
         has_tag = b";" in line.text
         if code not in PARAMETER_CHARS or code not in self.profile.commands:
-            return _reply(line.text, b"0E")
+            return frame(line.text, b"0E")
         if has_tag and len(tag) > MAX_TAG_CHARS:
-            return _reply(line.text, b"0G")
+            return frame(line.text, b"0G")
         if has_tag and not TAG_CHARS.issuperset(tag):
-            return _reply(line.text, b"0H")
+            return frame(line.text, b"0H")
         expected = PARAMETER_CHARS[code]
         if len(params) < expected:
-            return _reply(line.text, b"0C")
+            return frame(line.text, b"0C")
         if len(params) > expected:
-            return _reply(line.text, b"0D")
+            return frame(line.text, b"0D")
         if self._adjust_mode and code not in ADJUST_MODE_COMMANDS:
-            return _reply(line.text, b"10")
+            return frame(line.text, b"10")
         return self._execute(code, params, line.text, b";" + tag if has_tag else b"", now)
 
     def _execute(self, code: bytes, params: bytes, echo: bytes, tag_suffix: bytes, now: float) -> bytes | _Pending:
         if code == b"VV":
-            return _reply(echo, b"00", self.profile.version_body(self._serial))
+            return frame(echo, b"00", self.profile.version_body(self._serial))
         if code == b"PP":
-            return _reply(echo, b"00", self.profile.parameter_body())
+            return frame(echo, b"00", self.profile.parameter_body())
         if code == b"II":
             body = self.profile.status_body(
                 laser_on=self._laser_on, streaming=self._stream is not None, timer_ms=self._timer_ms(now)
             )
-            return _reply(echo, b"00", body)
+            return frame(echo, b"00", body)
         if code == b"BM":
             if self._laser_on:
-                return _reply(echo, b"02")
+                return frame(echo, b"02")
             self._laser_on, self._asleep = True, False
-            return _reply(echo, b"00")
+            return frame(echo, b"00")
         if code == b"%ST":
-            return _reply(echo, b"00", _checked(self._state_code()))
+            return frame(echo, b"00", checked_line(self._state_code()))
         if code == b"%SL":
             self._stream, self._laser_on, self._asleep = None, False, True
-            return _reply(echo, b"00")
+            return frame(echo, b"00")
         if code == b"RB":
             if self._reboot_asked is None or now - self._reboot_asked > REBOOT_CONFIRM_S:
                 self._reboot_asked = now
-                return _reply(echo, b"01")
+                return frame(echo, b"01")
             self._reboot_asked = None
             self._stream, self._laser_on, self._adjust_mode, self._asleep = None, False, False, False
-            self._epoch_ms = _milliseconds(now)
-            return _reply(echo, b"00")
+            self._epoch_ms = milliseconds(now)
+            return frame(echo, b"00")
         if code == b"QT":
             self._stream, self._laser_on = None, False
-            return _reply(echo, b"00")
+            return frame(echo, b"00")
         if code in (b"RS", b"RT"):
             self._stream, self._laser_on, self._adjust_mode, self._asleep = None, False, False, False
-            self._epoch_ms = _milliseconds(now)
-            return _reply(echo, b"00")
+            self._epoch_ms = milliseconds(now)
+            return frame(echo, b"00")
         if code == b"TM":
             return self._time_adjust(params, echo, now)
         if code == b"SS":
-            return _reply(echo, self._set_bit_rate(params))
+            return frame(echo, self._set_bit_rate(params))
         if code in SINGLE_SCAN:
             return self._single_scan(code, params, echo, now)
         return self._start_stream(code, params, echo, tag_suffix, now)
@@ -329,19 +317,19 @@ class Scip22Device:
     def _time_adjust(self, params: bytes, echo: bytes, now: float) -> bytes:
         if params == b"0":
             if self._adjust_mode:
-                return _reply(echo, b"02")
+                return frame(echo, b"02")
             if self._stream is not None:
-                return _reply(echo, b"10")
+                return frame(echo, b"10")
             self._adjust_mode, self._laser_on, self._asleep = True, False, False
-            return _reply(echo, b"00")
+            return frame(echo, b"00")
         if params == b"1":
-            return _reply(echo, b"00", _checked(encode_values(np.array([self._timer_ms(now)]), 4)))
+            return frame(echo, b"00", checked_line(encode_values(np.array([self._timer_ms(now)]), 4)))
         if params == b"2":
             if not self._adjust_mode:
-                return _reply(echo, b"03")
+                return frame(echo, b"03")
             self._adjust_mode = False
-            return _reply(echo, b"00")
-        return _reply(echo, b"01")
+            return frame(echo, b"00")
+        return frame(echo, b"01")
 
     def _request(self, params: bytes, *, streaming: bool) -> ScanRequest | bytes:
         request = parse_scan_request(params, streaming=streaming, max_step=self.profile.max_step)
@@ -354,72 +342,43 @@ class Scip22Device:
     def _single_scan(self, code: bytes, params: bytes, echo: bytes, now: float) -> bytes | _Pending:
         request = self._request(params, streaming=False)
         if isinstance(request, bytes):
-            return _reply(echo, request)
+            return frame(echo, request)
         if not self._laser_on:
-            return _reply(echo, b"10")
+            return frame(echo, b"10")
         index = max(self._first_scan_from(now), self._last_single_scan + 1)
         self._last_single_scan = index
-        fmt = FORMATS[code]
         scan_time = self._scan_time(index)
         return _Pending(
             self._departure(index, request),
             scan_time,
-            lambda: _reply(echo, b"00", self._scan_body(self._scan_source(scan_time), request, fmt)),
+            lambda: frame(echo, b"00", self._scan_body(self._scan_source(scan_time), request, code)),
         )
 
     def _start_stream(self, code: bytes, params: bytes, echo: bytes, tag_suffix: bytes, now: float) -> bytes:
         request = self._request(params, streaming=True)
         if isinstance(request, bytes):
-            return _reply(echo, request)
-        self._laser_on, self._asleep = True, False
-        self._stream = _Stream(
-            command=code,
-            request=request,
-            echo_prefix=code + params[:-2],
-            tag_suffix=tag_suffix,
-            next_index=self._first_scan_from(now),
-            remaining=request.count or None,
-        )
-        return _reply(echo, b"00")
+            return frame(echo, request)
+        self._asleep = False
+        self._new_stream(code, params, tag_suffix, request, self._first_scan_from(now))
+        return frame(echo, b"00")
 
     # --- streaming ------------------------------------------------------------------
 
     def _stream_until(self, now: float) -> list[tuple[float, Output]]:
+        """(departure, message) of the streamed scans whose data have left by `now`."""
         stream = self._stream
-        if stream is None or self._departure(stream.next_index, stream.request) > now + _EPSILON_S:
+        if stream is None or self._departure(stream.next_index, stream.request) > now + EPSILON_S:
             return []
-        sweep = self._departure(0, stream.request) - self._scan_time(0)
-        latest = math.floor(((now - sweep) * 1000 - self._phase_ms) / self.profile.period_ms + _EPSILON_S)
-        period = stream.request.interval + 1
-        due = (latest - stream.next_index) // period + 1
-        if stream.remaining is not None:
-            due = min(due, stream.remaining)  # the last of N scans is the newest there will be
-        self._skip(stream, max(due - MAX_BACKLOG_SCANS, 0))
-        outputs = []
-        while self._stream is stream and stream.next_index <= latest:
-            departure = self._departure(stream.next_index, stream.request)
-            outputs.append((departure, Output(self._stream_message(stream), droppable=True)))
-        return outputs
+        request = stream.request
+        sweep = self._departure(0, request) - self._scan_time(0)
+        return [
+            (self._departure(index, request), Output(message, droppable=True))
+            for index, message in self._stream_through(self._latest_index(now - sweep))
+        ]
 
-    def _stream_message(self, stream: _Stream) -> bytes:
-        scan = self._scan_source(self._scan_time(stream.next_index))
-        remaining = 0 if stream.remaining is None else stream.remaining - 1
-        echo = stream.echo_prefix + b"%02d" % remaining + stream.tag_suffix
-        message = _reply(echo, b"99", self._scan_body(scan, stream.request, FORMATS[stream.command]))
-        self._skip(stream, 1)
-        return message
-
-    def _skip(self, stream: _Stream, scans: int) -> None:
-        if scans == 0:
-            return
-        stream.next_index += scans * (stream.request.interval + 1)
-        if stream.remaining is not None:
-            stream.remaining -= scans
-            if stream.remaining <= 0:
-                self._stream, self._laser_on = None, False
-
-    def _scan_body(self, scan: EchoScan, request: ScanRequest, fmt: _Format) -> bytes:
+    def _scan_body(self, scan: EchoScan, request: ScanRequest, command: bytes) -> bytes:
         """Stamp line and data lines of the requested steps; a cluster reports its nearest step."""
+        fmt = FORMATS[command]
         steps = slice(request.start, request.end + 1)
         values = np.asarray(scan.values, dtype=np.int64)[steps]
         chosen = cluster_choice(values, request.cluster) + request.start
@@ -433,8 +392,7 @@ class Scip22Device:
         if fmt.intensity:
             strengths = _intensity_of(source, shape)[chosen]
             strengths = strengths[:, : ranges.shape[1]] if ranges.ndim > 1 else strengths
-        stamp = (round(scan.time_s * 1000) - self._epoch_ms) % TIMER_MODULUS
-        return _checked(encode_values(np.array([stamp]), 4)) + data_lines(encode_steps(ranges, strengths, fmt.width))
+        return self._stamp_line(round(scan.time_s * 1000)) + data_lines(encode_steps(ranges, strengths, fmt.width))
 
 
 def _intensity_of(intensities: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray:
@@ -442,15 +400,3 @@ def _intensity_of(intensities: np.ndarray | None, shape: tuple[int, ...]) -> np.
     if intensities is None:
         return np.zeros(shape, dtype=np.int64)
     return np.asarray(intensities, dtype=np.int64)
-
-
-def _reply(echo: bytes, status: bytes, body: bytes = b"") -> bytes:
-    return echo + b"\n" + status + checksum(status) + b"\n" + body + b"\n"
-
-
-def _checked(text: bytes) -> bytes:
-    return text + checksum(text) + b"\n"
-
-
-def _milliseconds(seconds: float) -> int:
-    return math.floor(seconds * 1000 + 1e-6)

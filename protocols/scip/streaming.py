@@ -1,0 +1,144 @@
+"""What every SCIP device shares: the message frame, the 24-bit timer, the mirror's
+revolution grid and the MD/MS-style stream (counting scans sent or skipped).
+
+`UrgDevice` (SCIP 2.0) and `Scip22Device` (SCIP 2.2) differ in when a scan is
+measured and when its data leave, and in how a scan's body is encoded; both
+subclass `StreamingDevice`, which holds the rest.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from protocols.scip.encoding import checksum, encode_values
+from protocols.scip.requests import ScanRequest
+
+TIMER_MODULUS = 1 << 24  # the 24-bit millisecond timer
+MAX_TAG_CHARS = 16
+TAG_CHARS = frozenset(b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789 ._+@")
+BIT_RATES = frozenset({19200, 38400, 57600, 115200, 250000, 500000, 750000})
+# A poll that comes late (its host was behind) streams only the newest scan: skipped
+# revolutions, never a burst.
+MAX_BACKLOG_SCANS = 1
+EPSILON_S = 1e-9
+
+
+@dataclass
+class Stream:
+    """A streaming command (MD/MS, and SCIP 2.2's ME/ND/NE) in progress."""
+
+    command: bytes
+    request: ScanRequest
+    echo_prefix: bytes  # the command and parameters as received, up to the count
+    tag_suffix: bytes  # b"" or b";" + tag, echoed on every scan
+    next_index: int  # scan index of the next message
+    remaining: int | None  # None while unlimited
+
+
+class StreamingDevice:
+    """The revolution grid (scan k at phase + k · period, whole milliseconds), the timer
+    and the stream. Subclasses set `_scan_source`, `_period_ms`, `_phase_ms`,
+    `_epoch_ms`, `_stream`, `_laser_on` and implement `_scan_body`."""
+
+    _scan_source: Callable[[float], Any]
+    _period_ms: int
+    _phase_ms: int
+    _epoch_ms: int
+    _stream: Stream | None
+    _laser_on: bool
+
+    def _scan_body(self, scan: Any, request: ScanRequest, command: bytes) -> bytes:
+        """Stamp line and data lines of `scan` as `command` sends them."""
+        raise NotImplementedError
+
+    # --- the revolution grid -------------------------------------------------------
+
+    def _scan_time(self, index: int) -> float:
+        """Scan `index`'s time on the grid (simulated s): a whole millisecond, so its stamp is exact."""
+        return (index * self._period_ms + self._phase_ms) / 1000
+
+    def _latest_index(self, now: float) -> int:
+        """Index of the last grid point at or before `now`."""
+        return math.floor((now * 1000 - self._phase_ms) / self._period_ms + EPSILON_S)
+
+    def _scan_at(self, index: int) -> Any:
+        return self._scan_source(self._scan_time(index))
+
+    # --- the timer ----------------------------------------------------------------
+
+    def _timer_ms(self, now: float) -> int:
+        return (milliseconds(now) - self._epoch_ms) % TIMER_MODULUS
+
+    def _stamp_line(self, stamp_ms: int) -> bytes:
+        """A time stamp (ms since power-on) as the device's timer reads it: 4 characters and a sum."""
+        return checked_line(encode_values(np.array([(stamp_ms - self._epoch_ms) % TIMER_MODULUS]), 4))
+
+    # --- the stream -----------------------------------------------------------------
+
+    def _new_stream(self, code: bytes, params: bytes, tag_suffix: bytes, request: ScanRequest, first: int) -> None:
+        """Start streaming `request` from scan `first`; the laser goes on."""
+        self._laser_on = True
+        self._stream = Stream(
+            command=code,
+            request=request,
+            echo_prefix=code + params[:-2],
+            tag_suffix=tag_suffix,
+            next_index=first,
+            remaining=request.count or None,
+        )
+
+    def _stream_through(self, latest: int) -> list[tuple[int, bytes]]:
+        """(index, message) of the stream's scans up to index `latest`; when more than
+        MAX_BACKLOG_SCANS are due, the older ones are skipped."""
+        stream = self._stream
+        if stream is None or stream.next_index > latest:
+            return []
+        period = stream.request.interval + 1
+        due = (latest - stream.next_index) // period + 1
+        if stream.remaining is not None:
+            due = min(due, stream.remaining)  # the last of N scans is the newest there will be
+        self._skip(stream, max(due - MAX_BACKLOG_SCANS, 0))
+        messages = []
+        while self._stream is stream and stream.next_index <= latest:
+            index = stream.next_index
+            messages.append((index, self._stream_message(stream)))
+        return messages
+
+    def _stream_message(self, stream: Stream) -> bytes:
+        """The next scan message; advances (and maybe ends) the stream."""
+        scan = self._scan_at(stream.next_index)
+        remaining = 0 if stream.remaining is None else stream.remaining - 1
+        echo = stream.echo_prefix + b"%02d" % remaining + stream.tag_suffix
+        message = frame(echo, b"99", self._scan_body(scan, stream.request, stream.command))
+        self._skip(stream, 1)
+        return message
+
+    def _skip(self, stream: Stream, scans: int) -> None:
+        """Count `scans` as sent; after the last of N, the laser goes off."""
+        if scans == 0:
+            return
+        stream.next_index += scans * (stream.request.interval + 1)
+        if stream.remaining is not None:
+            stream.remaining -= scans
+            if stream.remaining <= 0:
+                self._stream, self._laser_on = None, False
+
+
+def frame(echo: bytes, status: bytes, body: bytes = b"") -> bytes:
+    """Echo, status with its sum, body lines, and the closing empty line."""
+    return echo + b"\n" + status + checksum(status) + b"\n" + body + b"\n"
+
+
+def checked_line(text: bytes) -> bytes:
+    """One line: text, its sum, LF."""
+    return text + checksum(text) + b"\n"
+
+
+def milliseconds(seconds: float) -> int:
+    """Whole milliseconds elapsed; the epsilon absorbs float noise (0.3 * 1000 = 299.99…)."""
+    return math.floor(seconds * 1000 + 1e-6)
