@@ -34,6 +34,7 @@ from typing import Sequence
 import numpy as np
 
 from emulator.optics import BeamHits
+from emulator.sensors.physical import echo_kernels
 from emulator.sensors.physical.beams import (
     PUFFS_PER_PASS,
     Instants,
@@ -125,11 +126,12 @@ def echo_lists_at(hits: Sequence[BeamHits], beams: Sequence[Beams], receiver: Pu
     return EchoLists(lists.ranges_m.reshape(shape), lists.powers.reshape(shape), lists.count.reshape(shape[:2]))
 
 
-def detection_level(ranges_m: np.ndarray, threshold: float, receiver: PulsedReceiver, fog_filter: bool) -> np.ndarray | float:
-    """The weakest echo seen at each range: the threshold, raised near the unit when its fog filter is on."""
+def _near_level(threshold: float, receiver: PulsedReceiver, fog_filter: bool) -> tuple[float, float]:
+    """The weakest echo seen: the threshold, raised near the unit when its fog filter is on; as
+    (the range below which it is raised, the raised level)."""
     if not fog_filter or receiver.fog_filter_m <= 0:
-        return threshold
-    return np.where(ranges_m < receiver.fog_filter_m, threshold * receiver.fog_filter_gain, threshold)
+        return -np.inf, threshold
+    return receiver.fog_filter_m, threshold * receiver.fog_filter_gain
 
 
 def smoke_returns(smoke: SmokeEchoes, receiver: PulsedReceiver, threshold: float, fog_filter: bool = False
@@ -145,74 +147,17 @@ def smoke_returns(smoke: SmokeEchoes, receiver: PulsedReceiver, threshold: float
     rows = len(smoke.amp)
     # a pulse length holds at most the densest bin's energy per metre times its length (the cumulative is
     # linear within bins): only rows where that reaches the threshold can return anything
-    densest = (smoke.amp / np.diff(smoke.edges_m, axis=1)).max(axis=1, initial=0.0)
-    strong = np.flatnonzero(densest * receiver.separation_m >= threshold * (1.0 - 1e-9))
+    strong = echo_kernels.strong_rows(smoke.amp, smoke.edges_m, receiver.separation_m, threshold)
     if len(strong) == 0:
         return np.full((rows, 0), np.inf), np.zeros((rows, 0))
-    ranges, powers = _strong_smoke_returns(smoke.amp[strong], smoke.edges_m[strong], smoke.fractions, receiver, threshold, fog_filter)
-    all_ranges, all_powers = np.full((rows, ranges.shape[1]), np.inf), np.zeros((rows, ranges.shape[1]))
-    all_ranges[strong], all_powers[strong] = ranges, powers
+    near_m, near_threshold = _near_level(threshold, receiver, fog_filter)
+    ranges, powers, most = echo_kernels.smoke_runs(
+        smoke.amp.take(strong, axis=0), smoke.edges_m.take(strong, axis=0), smoke.fractions, receiver.separation_m,
+        threshold, near_m, near_threshold,
+    )
+    all_ranges, all_powers = np.full((rows, most), np.inf), np.zeros((rows, most))
+    all_ranges[strong], all_powers[strong] = ranges[:, :most], powers[:, :most]
     return all_ranges, all_powers
-
-
-def _strong_smoke_returns(amp: np.ndarray, edges_m: np.ndarray, fractions: np.ndarray, receiver: PulsedReceiver,
-                          threshold: float, fog_filter: bool) -> tuple[np.ndarray, np.ndarray]:
-    """`smoke_returns` of rows whose smoke may hold the threshold within a pulse length."""
-    rows, edges = edges_m.shape
-    cumulative = np.zeros((rows, edges))
-    np.cumsum(amp, axis=1, out=cumulative[:, 1:])
-    length = edges_m[:, -1:] - edges_m[:, :1]
-    reach = receiver.separation_m / length
-    at = _cumulative_at(cumulative, fractions, np.concatenate([fractions - reach, fractions + reach], axis=1))
-    at[:, :edges] -= cumulative
-    at[:, edges:] -= cumulative
-    at[:, :edges] *= -1.0  # the windows ending at the grid points, then those ending a pulse length on
-    points = np.concatenate([edges_m, edges_m + receiver.separation_m], axis=1)
-    order = np.argsort(points, axis=1, kind="stable")
-    order += (np.arange(rows) * (2 * edges))[:, None]  # row-major flat positions: `take` beats 2-D indexing
-    points = points.take(order)
-    signal = at.take(order)
-    level = detection_level(points, threshold, receiver, fog_filter)
-    above = signal >= level
-    starts = above.copy()
-    starts[:, 1:] &= ~above[:, :-1]
-    run = np.cumsum(starts, axis=1)  # 1 + each sample's return while above
-    most = int(run[:, -1].max())
-    if most == 0:
-        return np.full((rows, 0), np.inf), np.zeros((rows, 0))
-    run[~above] = 0
-    powers = np.stack([np.where(run == j + 1, signal, 0.0).max(axis=1) for j in range(most)], axis=1)  # J returns, J small
-    ranges = np.full(rows * most, np.inf)
-    ranges[(np.arange(rows)[:, None] * most + run - 1)[starts]] = _crossings(signal, level, points, starts)
-    return ranges.reshape(rows, most), powers
-
-
-def _cumulative_at(cumulative: np.ndarray, fractions: np.ndarray, along: np.ndarray) -> np.ndarray:
-    """The cumulative energy (R, M+1), given at the shared `fractions` of each row's extent and linear
-    between them, at fractions `along` (R, P) (clipped to the extent)."""
-    along = np.clip(along, 0.0, 1.0)
-    bins = len(fractions) - 1
-    index = np.minimum(np.searchsorted(fractions, along, side="right") - 1, bins - 1)
-    part = (along - fractions.take(index)) / (fractions.take(index + 1) - fractions.take(index))
-    index += (np.arange(len(cumulative)) * cumulative.shape[1])[:, None]
-    low = cumulative.take(index)
-    high = cumulative.take(index + 1)
-    high -= low
-    high *= part
-    high += low
-    return high
-
-
-def _crossings(signal: np.ndarray, level: np.ndarray | float, points_m: np.ndarray, starts: np.ndarray) -> np.ndarray:
-    """Where the signal first reaches the level at each run start (row-major order of `starts`):
-    linear between the sample before and the start; a run starting at the first sample starts there."""
-    row, column = np.nonzero(starts)
-    before = np.maximum(column - 1, 0)
-    low, high = signal[row, before], signal[row, column]
-    level_here = level[row, column] if isinstance(level, np.ndarray) else level
-    with np.errstate(divide="ignore", invalid="ignore"):
-        part = np.where(column > 0, np.clip((level_here - low) / (high - low), 0.0, 1.0), 0.0)
-    return points_m[row, before] + part * (points_m[row, column] - points_m[row, before])
 
 
 def select_echoes(ranges_m: np.ndarray, powers: np.ndarray, threshold: float, receiver: PulsedReceiver,
@@ -220,51 +165,8 @@ def select_echoes(ranges_m: np.ndarray, powers: np.ndarray, threshold: float, re
     """The echo lists (N, E) of N beams' candidate returns (N, C) in any order (absent ones: range inf,
     power 0): returns closer than `separation_m` merge, those below the detection level are dropped,
     and of the rest a unit keeping E echoes reports the first E it receives (the nearest)."""
-    n, candidates = ranges_m.shape
-    present = powers > 0
-    several = np.flatnonzero(np.count_nonzero(present, axis=1) > 1)  # most beams have one return: nothing to sort
-    merged = np.full((n, candidates), np.inf)
-    power = np.zeros((n, candidates))
-    only = np.argmax(present, axis=1) + np.arange(0, n * candidates, candidates)
-    merged[:, 0] = np.where(present.ravel().take(only), ranges_m.ravel().take(only), np.inf)
-    power[:, 0] = np.where(present.ravel().take(only), powers.ravel().take(only), 0.0)
-    if len(several):
-        merged[several], power[several] = _merged(ranges_m[several], np.where(present[several], powers[several], 0.0), receiver.separation_m)
-    seen = (power > 0) & (power >= detection_level(merged, threshold, receiver, fog_filter))
-    return _kept(merged, power, seen, receiver.max_echoes)
-
-
-def _merged(ranges_m: np.ndarray, powers: np.ndarray, separation_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Rows' returns (R, C) sorted by range and merged where closer than `separation_m`: (range, power)
-    of each merged echo nearest first, then inf / 0. A lone return keeps its own range exactly."""
-    n, candidates = ranges_m.shape
-    positions = np.argsort(np.where(powers > 0, ranges_m, np.inf), axis=1, kind="stable")
-    positions += np.arange(0, n * candidates, candidates)[:, None]
-    amps = powers.take(positions)
-    present = amps > 0
-    ranges = np.where(present, ranges_m.take(positions), np.inf)
-    new_group = np.ones((n, candidates), dtype=bool)
-    with np.errstate(invalid="ignore"):
-        new_group[:, 1:] = ~(ranges[:, 1:] - ranges[:, :-1] < separation_m)
-    flat = (np.cumsum(new_group, axis=1) - 1 + np.arange(0, n * candidates, candidates)[:, None]).ravel()
-    size = n * candidates
-    power = np.bincount(flat, weights=amps.ravel(), minlength=size)
-    moment = np.bincount(flat, weights=(amps * np.where(present, ranges, 0.0)).ravel(), minlength=size)
-    members = np.bincount(flat, weights=present.ravel(), minlength=size)
-    first_range = np.full(size, np.inf)
-    first_range[flat[new_group.ravel()]] = ranges[new_group]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        merged = np.where(members > 1, moment / power, first_range)
-    return merged.reshape(n, candidates), power.reshape(n, candidates)
-
-
-def _kept(ranges: np.ndarray, powers: np.ndarray, seen: np.ndarray, max_echoes: int) -> EchoLists:
-    """Pack each row's seen echoes (in range order) into E slots: the first E received, the nearest."""
-    n = len(ranges)
-    rank = np.cumsum(seen, axis=1) - 1
-    kept = seen & (rank < max_echoes)
-    out_ranges, out_powers = np.full((n, max_echoes), np.nan), np.zeros((n, max_echoes))
-    target = (np.arange(n)[:, None] * max_echoes + rank)[kept]
-    out_ranges.ravel()[target] = ranges[kept]
-    out_powers.ravel()[target] = powers[kept]
-    return EchoLists(out_ranges, out_powers, np.minimum(seen.sum(axis=1), max_echoes))
+    near_m, near_threshold = _near_level(threshold, receiver, fog_filter)
+    return EchoLists(*echo_kernels.kept_echoes(
+        np.ascontiguousarray(ranges_m, dtype=float), np.ascontiguousarray(powers, dtype=float), receiver.separation_m,
+        threshold, near_m, near_threshold, receiver.max_echoes,
+    ))

@@ -1,0 +1,220 @@
+"""Compiled per-beam walks of the multi-echo receiver (`multi_echo`): the smoke's returns along each
+beam's range grid, and the merging and keeping of each beam's returns.
+
+Each beam's walk is a short sequential scan (a cumulative sum, a merge of two sorted sample lists,
+runs above a level, a sort of a handful of candidates). In numpy every step is a pass over
+(beams × samples) temporaries with gathers and sorts; compiled, it is one pass per beam
+(docs/performance.md gives the figures). The arithmetic is the numpy formulation's, operation for
+operation, so the values are the same to the last bit.
+
+Compiled on first use and cached on disk (`cache=True`): a fresh process with a warm cache loads them
+in well under a second.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+# error_model="numpy": a division by zero gives inf / NaN as numpy does, instead of raising
+_COMPILE = {"cache": True, "nogil": True, "error_model": "numpy"}
+
+
+@njit(**_COMPILE)
+def strong_rows(amp: np.ndarray, edges_m: np.ndarray, separation_m: float, threshold: float) -> np.ndarray:
+    """Rows whose densest bin holds the threshold within a pulse length (the others return nothing)."""
+    rows, bins = amp.shape
+    keep = np.empty(rows, dtype=np.intp)
+    count = 0
+    for r in range(rows):
+        densest = 0.0  # `initial=0.0`; a NaN anywhere makes the row's maximum NaN, as numpy's
+        for i in range(bins):
+            density = amp[r, i] / (edges_m[r, i + 1] - edges_m[r, i])
+            if density != density or densest != densest:
+                densest = np.nan
+            elif density > densest:
+                densest = density
+        if densest * separation_m >= threshold * (1.0 - 1e-9):
+            keep[count] = r
+            count += 1
+    return keep[:count]
+
+
+@njit(**_COMPILE)
+def _windows(cumulative: np.ndarray, fractions: np.ndarray, reach: float, ending: np.ndarray, past: np.ndarray) -> None:
+    """The energy of the pulse length ending at each edge (`ending`) and ending `reach` (a fraction of the
+    extent) past it (`past`): the cumulative (M+1,), given at `fractions` and linear between, at each
+    edge ± reach clipped to the extent. The points rise with the edge, so each one's bin (numpy's
+    `searchsorted(..., side="right") - 1`, at most the last bin) is found by walking on from the last."""
+    edges = len(fractions)
+    bins = edges - 1
+    below = 0
+    beyond = 0
+    for j in range(edges):
+        along = min(max(fractions[j] - reach, 0.0), 1.0)
+        while below < bins and fractions[below + 1] <= along:
+            below += 1
+        index = min(below, bins - 1)
+        part = (along - fractions[index]) / (fractions[index + 1] - fractions[index])
+        low = cumulative[index]
+        ending[j] = -(((cumulative[index + 1] - low) * part + low) - cumulative[j])
+        along = min(max(fractions[j] + reach, 0.0), 1.0)
+        while beyond < bins and fractions[beyond + 1] <= along:
+            beyond += 1
+        index = min(beyond, bins - 1)
+        part = (along - fractions[index]) / (fractions[index + 1] - fractions[index])
+        low = cumulative[index]
+        past[j] = ((cumulative[index + 1] - low) * part + low) - cumulative[j]
+
+
+@njit(**_COMPILE)
+def smoke_runs(
+    amp: np.ndarray,
+    edges_m: np.ndarray,
+    fractions: np.ndarray,
+    separation_m: float,
+    threshold: float,
+    near_m: float,
+    near_threshold: float,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Each row's smoke returns: (ranges (R, P) inf past its last, powers (R, P) 0 past it, J = the most returns of a row).
+
+    The signal (backscatter of the last pulse length) is sampled at the grid's edges and a pulse length
+    past each, in range order (ties: the edge first); each run of samples at or above the level
+    (`near_threshold` nearer than `near_m`, else `threshold`) is a return placed where the signal first
+    reaches the level (linear between samples), with the run's strongest sample as its power.
+    """
+    rows, edges = edges_m.shape
+    samples = 2 * edges
+    ranges = np.full((rows, edges), np.inf)  # a row's runs alternate with gaps between its 2 (M+1) samples
+    powers = np.zeros((rows, edges))
+    cumulative = np.empty(edges)
+    ending = np.empty(edges)  # the window ending at each edge
+    past = np.empty(edges)  # the window ending a pulse length past each edge
+    points = np.empty(samples)  # both in range order
+    signals = np.empty(samples)
+    most = 0
+    lowest = min(threshold, near_threshold)
+    for r in range(rows):
+        cumulative[0] = 0.0
+        for i in range(edges - 1):
+            cumulative[i + 1] = cumulative[i] + amp[r, i]
+        _windows(cumulative, fractions, separation_m / (edges_m[r, edges - 1] - edges_m[r, 0]), ending, past)
+        if max(ending.max(), past.max()) < lowest:
+            continue  # no sample reaches the level: no return
+        # the samples in range order, ties the edge first (numpy's stable sort of the edges, then the points past them)
+        later = 0
+        for j in range(edges):
+            while later < edges and edges_m[r, later] + separation_m < edges_m[r, j]:
+                later += 1
+            points[j + later] = edges_m[r, j]
+            signals[j + later] = ending[j]
+        earlier = 0
+        for j in range(edges):
+            point = edges_m[r, j] + separation_m
+            while earlier < edges and edges_m[r, earlier] <= point:
+                earlier += 1
+            points[j + earlier] = point
+            signals[j + earlier] = past[j]
+        run = -1
+        strongest = 0.0
+        was_above = False
+        for k in range(samples):
+            signal = signals[k]
+            level = near_threshold if points[k] < near_m else threshold
+            above = signal >= level
+            if above and not was_above:
+                if run >= 0:
+                    powers[r, run] = strongest
+                run += 1
+                strongest = signal
+                if k == 0:
+                    ranges[r, run] = points[0] + 0.0 * (points[0] - points[0])
+                else:
+                    part = min(max((level - signals[k - 1]) / (signal - signals[k - 1]), 0.0), 1.0)
+                    ranges[r, run] = points[k - 1] + part * (points[k] - points[k - 1])
+            elif above and signal > strongest:
+                strongest = signal
+            was_above = above
+        if run >= 0:
+            powers[r, run] = strongest
+        most = max(most, run + 1)
+    return ranges, powers, most
+
+
+@njit(**_COMPILE)
+def kept_echoes(
+    ranges_m: np.ndarray,
+    powers: np.ndarray,
+    separation_m: float,
+    threshold: float,
+    near_m: float,
+    near_threshold: float,
+    max_echoes: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The echo lists of rows' candidate returns (N, C) in any order (absent: power 0): sorted by range,
+    merged where closer than `separation_m` (powers add, range their power-weighted mean; a lone return
+    keeps its own range), those below the level dropped, the first `max_echoes` kept.
+    Returns ranges (N, E) NaN past each row's count, powers (N, E) 0 past it, count (N,)."""
+    n, candidates = ranges_m.shape
+    out_ranges = np.full((n, max_echoes), np.nan)
+    out_powers = np.zeros((n, max_echoes))
+    count = np.zeros(n, dtype=np.int64)
+    order = np.empty(candidates, dtype=np.intp)
+    keys = np.empty(candidates)
+    merged = np.empty(candidates)
+    power = np.empty(candidates)
+    for r in range(n):
+        present = 0
+        only = 0
+        for c in range(candidates):
+            if powers[r, c] > 0:
+                if present == 0:
+                    only = c
+                present += 1
+        groups = 1
+        if present <= 1:
+            merged[0] = ranges_m[r, only] if present else np.inf
+            power[0] = powers[r, only] if present else 0.0
+        else:
+            for c in range(candidates):  # a stable insertion sort by range, absent returns last
+                key = ranges_m[r, c] if powers[r, c] > 0 else np.inf
+                k = c
+                while k > 0 and keys[k - 1] > key:
+                    keys[k] = keys[k - 1]
+                    order[k] = order[k - 1]
+                    k -= 1
+                keys[k] = key
+                order[k] = c
+            groups = 0
+            members = 0
+            moment = 0.0
+            last = 0.0
+            for k in range(candidates):
+                amp = powers[r, order[k]]
+                here = amp > 0
+                range_here = ranges_m[r, order[k]] if here else np.inf
+                if k == 0 or not (range_here - last < separation_m):
+                    if groups and members > 1:
+                        merged[groups - 1] = moment / power[groups - 1]
+                    groups += 1
+                    merged[groups - 1] = range_here
+                    power[groups - 1] = 0.0
+                    members = 0
+                    moment = 0.0
+                power[groups - 1] += amp
+                moment += amp * (range_here if here else 0.0)
+                members += 1 if here else 0
+                last = range_here
+            if members > 1:
+                merged[groups - 1] = moment / power[groups - 1]
+        seen = 0
+        for g in range(groups):
+            level = near_threshold if merged[g] < near_m else threshold
+            if power[g] > 0 and power[g] >= level:
+                if seen < max_echoes:
+                    out_ranges[r, seen] = merged[g]
+                    out_powers[r, seen] = power[g]
+                seen += 1
+        count[r] = min(seen, max_echoes)
+    return out_ranges, out_powers, count
