@@ -1,11 +1,14 @@
 """A sensor's scans for all its endpoints, computed once each, off the loop and ahead of time.
 
-A scan at simulated time t is a pure function of t, so shortly before a
-device's next deadline the scan it will ask for is started on the scan
-thread, and it is ready when the device asks. A steady stream (the same
-request at a constant stride, as a streaming device makes) is computed
-SCAN_BATCH scans per job with `sensor.scans`, which shares each numpy pass
-among them; a request nobody foresaw is still computed alone.
+A scan at simulated time t is a pure function of t, so the scan a device
+will ask for at its next deadline is started on the scan thread as that
+deadline is scheduled (`prefetch`), and it is ready when the device asks. A
+steady stream (the same request at a constant stride, as a streaming device
+makes) is computed SCAN_BATCH scans per job with `sensor.scans`, which
+shares each numpy pass among them; its next batch is foreseen as one of its
+scans is read and the batch runs low (`_follow_stream`), so it needs no
+wake-up of its own. A request nobody foresaw is still computed alone, and
+started at once.
 
 When the machine cannot keep up (more sensors than its cores compute), a
 device that is behind is handed the freshest scan ready that it has not sent
@@ -47,9 +50,9 @@ SCAN_BATCH = 8
 # Two strides are the same stream if they agree this closely: devices ask at
 # index × period, which the µs grid rounds to strides one tick apart.
 STRIDE_TOLERANCE_S = 1e-6
-# Start a scan this long (wall) before its deadline: early enough to be ready,
-# late enough not to compete for the CPU with the previous scan's delivery
-# (on a pty the kernel forwards bytes on a worker thread that a busy CPU delays).
+# A steady stream's next batch is foreseen once the scans foreseen reach less than this long (wall)
+# past the device's next scan: a stream faster than 1/PREFETCH_LEAD_S (an LMS200's 37.5 Hz) then
+# has its batch under way a few scans ahead, a URG's (10 Hz) one scan ahead.
 PREFETCH_LEAD_S = 0.07
 # A behind stream is foreseen every m-th scan, m at most this (a sensor then sends one scan in 32).
 MAX_SPACING = 32
@@ -351,8 +354,9 @@ class ScanCache:
         return len(self._futures)
 
     def prefetch(self, time_s: float) -> None:
-        """Start computing the scan the device will most likely ask for at `time_s`: the next batch
-        if it is the stream's next scan past those foreseen (the prefetch lead can exceed a stride)."""
+        """Make sure the scan the device will most likely ask for at `time_s` is foreseen (called as its
+        wake-up is scheduled; a lookup when it is): the next batch if it is the stream's next scan past
+        those foreseen, else that scan alone, started at once."""
         request = self._last_request
         if request is None:
             return
@@ -478,8 +482,9 @@ class ScanCache:
         if previous > 1.0 >= spacing:  # caught up: every scan again from now on (those foreseen are kept)
             self._predict(shape, time_s, stride, request)
             return
-        # behind, the next batch is foreseen two scans ahead: it waits its turn among the other sensors'
-        lead = stride * spacing * (1 if spacing <= 1.0 else 2)
+        # behind, the next batch is foreseen two scans ahead: it waits its turn among the other sensors';
+        # on time, while the scans foreseen reach less than PREFETCH_LEAD_S past the next one
+        lead = 2 * stride * spacing if spacing > 1.0 else stride + PREFETCH_LEAD_S * self._speed()
         until = self._predicted_until.get(shape)
         if until is not None and until - time_s > lead + STRIDE_TOLERANCE_S:
             return  # enough foreseen

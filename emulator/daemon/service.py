@@ -7,8 +7,9 @@ machine) and transport. Each device is woken at its `next_deadline()`
 (simulated time, mapped to wall time through the clock's speed).
 
 Scans are computed on one "scan thread", ahead of time: a scan at simulated
-time t is a pure function of t, so shortly before a device's next deadline
-the scan it will ask for is started, and it is ready when the device asks.
+time t is a pure function of t, so as a device's next wake-up is scheduled
+the scan it will ask for then is foreseen (started at once if nothing has
+started it yet), and it is ready when the device asks.
 Computing on the loop thread at the deadline took 1–8 ms (railway), which
 showed up as scan-period jitter and command latency (docs/transports.md).
 A steady stream (the same request at a constant stride, as a streaming device
@@ -35,7 +36,6 @@ from typing import Any, Callable, Mapping, Protocol, Sequence
 
 from emulator.daemon.clock import WallClock
 from emulator.daemon.scan_cache import (
-    PREFETCH_LEAD_S,
     SCAN_BATCH,
     ScanCache,
     ScanObserver,
@@ -163,8 +163,10 @@ class _WaitingForScan:
 class DeviceSession:
     """One endpoint's device: client bytes in, outputs out, woken at its deadlines.
 
-    `prefetch(deadline)` starts the scan the device will want then; `call_later`
-    schedules the wake-up (default: the loop's own, millisecond-accurate timers).
+    `prefetch(scan_time)`, called as the wake-up is scheduled, makes sure the scan the
+    device will want then is foreseen (started at once if nobody foresaw it; a steady
+    stream's batches are foreseen as its scans are read, with no wake-up of their own);
+    `call_later` schedules the wake-up (default: the loop's own, millisecond-accurate timers).
     `pending(scan_time)` gives the job computing that scan, if any: at its deadline
     the device is woken only once that job is done, so the loop never waits on a
     computation (the device then finds its scan ready). Client bytes likewise:
@@ -197,7 +199,6 @@ class DeviceSession:
         self._input_scan = input_scan
         self._call_later = call_later or loop.call_later
         self._timer: Cancellable | None = None
-        self._prefetch_timer: Cancellable | None = None
         self._held: bytearray | None = None  # input waiting for the scan it may read
         self.discarded_input = 0  # held input beyond MAX_HELD_INPUT_BYTES
 
@@ -257,10 +258,9 @@ class DeviceSession:
         self._schedule()
 
     def stop(self) -> None:
-        for timer in (self._timer, self._prefetch_timer):
-            if timer is not None:
-                timer.cancel()
-        self._timer = self._prefetch_timer = None
+        if self._timer is not None:
+            self._timer.cancel()
+        self._timer = None
 
     def _wake(self) -> None:
         self._timer = None
@@ -327,9 +327,8 @@ class DeviceSession:
             if delay == float("inf"):
                 return  # the clock is paused: rescheduled when it resumes
             self._timer = self._call_later(delay, self._wake)
-            if self._prefetch is not None:
-                lead = max(0.0, delay - PREFETCH_LEAD_S)
-                self._prefetch_timer = self._call_later(lead, self._prefetch, self._scan_time(deadline))
+            if self._prefetch is not None:  # no wake-up of its own: a stream's batches are foreseen as it is read
+                self._prefetch(self._scan_time(deadline))
 
     def _scan_time(self, deadline: float) -> float:
         """The scan the device will ask for at `deadline`: the one it names if it can

@@ -6,6 +6,7 @@ scans are fresh, and the fleet is back on time within a second once the overload
 from __future__ import annotations
 
 import math
+from collections import Counter
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -14,7 +15,7 @@ import numpy as np
 import pytest
 
 from emulator.daemon.clock import ManualClock
-from emulator.daemon.scan_cache import ScanCache
+from emulator.daemon.scan_cache import SCAN_BATCH, ScanCache
 from emulator.daemon.scheduler import Scheduler
 from emulator.daemon.service import DeviceSession
 from emulator.sensors.scan import Scan
@@ -276,3 +277,30 @@ def test_devices_tell_the_period_of_their_stream_so_a_skipping_one_is_still_batc
         lms.receive(every_scan, now=5.0)
     assert fast.scan_stride_s() == pytest.approx(2 / 75)  # 0.5°: two mirror revolutions
     assert slow.scan_stride_s() is None  # 0.76 s a telegram: the newest scan each time the line frees
+
+
+def test_a_fleet_on_time_costs_the_loop_one_wake_up_a_scan(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Within capacity each scan costs one timer wake-up (its deadline), and each batch one more
+    (its start, half a stride after it is foreseen): a stream's next batch is foreseen as its scans
+    are read, with no prefetch wake-up of its own; still no device ever waits for its scan."""
+    scheduled: list[str] = []
+    call_later = SimulatedTimers.call_later
+
+    def noting(self: SimulatedTimers, delay: float, callback: Callable[..., Any], *args: Any) -> Any:
+        scheduled.append(getattr(callback, "__name__", repr(callback)))
+        return call_later(self, delay, callback, *args)
+
+    monkeypatch.setattr(SimulatedTimers, "call_later", noting)
+    count = 4
+    fleet = Fleet(count)
+    fleet.stream(0.5)
+    fleet.run_until(2.0)
+    scheduled.clear()
+    fleet.run_until(6.0)
+    scans = sum(len(fleet.received(index, 2.0, 6.0)) for index in range(count))
+    assert scans == count * 40  # every revolution of every sensor
+    wake_ups = Counter(name for name in scheduled if name != "_finish")  # not the simulated workers'
+    assert set(wake_ups) <= {"_wake", "start"}, wake_ups  # no prefetch timer; no `_resume`: nothing waited
+    assert wake_ups["_wake"] <= scans + count
+    assert wake_ups["start"] <= scans / SCAN_BATCH + count
+    assert sum(cache.waits for cache in fleet.caches) == 0

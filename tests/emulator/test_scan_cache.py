@@ -4,6 +4,7 @@ alone and never behind a batch, and the cache stays bounded."""
 
 from __future__ import annotations
 
+import math
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Iterator, Sequence
@@ -11,7 +12,7 @@ from typing import Any, Iterator, Sequence
 import numpy as np
 import pytest
 
-from emulator.daemon.scan_cache import SCAN_BATCH, ScanCache
+from emulator.daemon.scan_cache import PREFETCH_LEAD_S, SCAN_BATCH, ScanCache
 from emulator.scene import load_scene
 from emulator.sensors import create_sensor
 from emulator.sensors.lms200 import LmsSensor, configured_window
@@ -136,26 +137,24 @@ def test_the_cache_stays_bounded(
         ScanCache(Recording(sensor), scan_thread, size=2 * SCAN_BATCH - 1)
 
 
-def test_a_stream_prefetched_several_scans_ahead_is_still_computed_in_batches(
+def test_a_stream_faster_than_the_prefetch_lead_has_its_batches_foreseen_that_far_ahead(
     sensor: LmsSensor, request_keywords: dict[str, Any], scan_thread: ThreadPoolExecutor
 ) -> None:
-    """The daemon prefetches each scan PREFETCH_LEAD_S (70 ms) before its deadline, which is about
-    2.6 strides of an LMS200 stream: those prefetches must extend the batches, not go alone."""
+    """The daemon has no prefetch wake-up: as a device reads a scan, and its next wake-up is
+    scheduled (`prefetch` of its next scan), the stream's next batch is foreseen once those foreseen
+    reach less than PREFETCH_LEAD_S (70 ms, about 2.6 strides of an LMS200 stream) past its next
+    scan; in batches, nothing computed twice."""
     recording = Recording(sensor)
     cache = ScanCache(recording, scan_thread)
-    lead_s = 0.07
-    events = sorted(
-        [(index * LMS_SCAN_PERIOD_S - lead_s, "prefetch", index) for index in range(1, 5 * SCAN_BATCH)]
-        + [(index * LMS_SCAN_PERIOD_S, "call", index) for index in range(1, 5 * SCAN_BATCH)]
-    )
-    for _, kind, index in events:
-        if kind == "prefetch":
-            cache.prefetch(index * LMS_SCAN_PERIOD_S)
-        else:
-            cache(index * LMS_SCAN_PERIOD_S, **request_keywords)
+    for index in range(1, 5 * SCAN_BATCH):
+        cache(index * LMS_SCAN_PERIOD_S, **request_keywords)
+        cache.prefetch((index + 1) * LMS_SCAN_PERIOD_S)
+        ahead = math.floor((LMS_SCAN_PERIOD_S + PREFETCH_LEAD_S) / LMS_SCAN_PERIOD_S)
+        foreseen = [cache.pending((index + j) * LMS_SCAN_PERIOD_S) is not None for j in range(1, ahead + 1)]
+        assert all(foreseen[: 1 if index < 3 else ahead]), (index, foreseen)  # its stride is known from the third
     scan_thread.shutdown(wait=True)
     alone = [times for kind, times in recording.calls if kind == "scan"]
-    assert len(alone) <= 5, f"{len(alone)} scans computed alone: {alone}"
+    assert len(alone) <= 3, f"{len(alone)} scans computed alone: {alone}"
     assert [len(times) for kind, times in recording.calls if kind == "scans"][1:] == [SCAN_BATCH] * 4
     ticks = recording.computed_ticks()
     assert len(ticks) == len(set(ticks)), "a scan was computed twice"
