@@ -17,7 +17,7 @@ import numpy as np
 
 from protocols.device import Output
 from protocols.scip import scip1
-from protocols.scip.encoding import cluster_minimum, data_lines, encode_values
+from protocols.scip.encoding import cluster_minimum, data_lines, encode_value, encode_values
 from protocols.scip.framing import Line, LineSplitter
 from protocols.scip.identity import (
     DEFAULT_BIT_RATE,
@@ -321,7 +321,7 @@ class UrgDevice(StreamingDevice):
         if params == b"1":
             if not self._adjust_mode:
                 return frame(echo, b"04")
-            return frame(echo, b"00", checked_line(encode_values(np.array([self._timer_ms(now)]), 4)))
+            return frame(echo, b"00", checked_line(encode_value(self._timer_ms(now), 4)))
         if params == b"2":
             if not self._adjust_mode:
                 return frame(echo, b"03")

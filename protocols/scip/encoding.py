@@ -15,6 +15,8 @@ import numpy as np
 CHAR_OFFSET = 0x30
 BLOCK_CHARS = 64
 LF = 0x0A
+MAX_WIDTH = 4  # 24 bits (a time stamp): the widest group SCIP sends
+_SHIFTS = {width: np.arange(6 * (width - 1), -1, -6, dtype=np.uint32) for width in range(1, MAX_WIDTH + 1)}
 ERROR_CODE_LIMIT = 20  # URG-04LX values below this are error codes, not mm
 
 
@@ -35,10 +37,24 @@ def encode_values(values: np.ndarray, width: int) -> bytes:
     URG-04LX cannot report a distance beyond what the encoding can carry, and
     wrapping would turn a far wall into a near one.
     """
-    clipped = np.clip(np.asarray(values, dtype=np.int64), 0, max_value(width))
-    shifts = 6 * np.arange(width - 1, -1, -1, dtype=np.int64)
-    chars = ((clipped[:, None] >> shifts) & 0x3F) + CHAR_OFFSET
-    return chars.astype(np.uint8).tobytes()
+    return encode_chars(values, width).tobytes()
+
+
+def encode_chars(values: np.ndarray, width: int) -> np.ndarray:
+    """`encode_values` as an array: shape (*values.shape, width), uint8, so callers
+    can interleave fields before one `tobytes` (a whole scan in a few numpy passes)."""
+    values = np.asarray(values)
+    saturated = np.minimum(np.maximum(values, 0), max_value(width)).astype(np.uint32)
+    chars = (saturated[..., None] >> _SHIFTS[width]) & 0x3F
+    chars = chars.astype(np.uint8)
+    chars += CHAR_OFFSET
+    return chars
+
+
+def encode_value(value: int, width: int) -> bytes:
+    """One value (a time stamp, the timer) as `encode_values` sends it, without numpy's per-call cost."""
+    value = min(max(int(value), 0), max_value(width))
+    return bytes(((value >> (6 * place)) & 0x3F) + CHAR_OFFSET for place in range(width - 1, -1, -1))
 
 
 def decode_values(text: bytes, width: int) -> np.ndarray:
@@ -117,20 +133,18 @@ def encode_steps(ranges: np.ndarray, intensities: np.ndarray | None, width: int 
     back). The '&' characters are data like any other: `data_lines` cuts the result
     into 64-character lines, so an echo may straddle two lines.
     """
-    ranges = np.asarray(ranges, dtype=np.int64)
-    if ranges.ndim == 1:
-        ranges = ranges[:, None]
-    fields = [ranges] if intensities is None else [ranges, np.asarray(intensities, dtype=np.int64).reshape(ranges.shape)]
-    steps, echoes = ranges.shape
-    group = width * len(fields)
+    ranges = np.asarray(ranges)
+    fields = ranges[..., None] if intensities is None else np.stack([ranges, np.asarray(intensities).reshape(ranges.shape)], axis=-1)
+    if ranges.ndim == 1 or ranges.shape[1] == 1:  # one echo per step: no '&' at all
+        return encode_chars(fields, width).tobytes()
+    steps, echoes, count = fields.shape
+    group = width * count
     slot = np.empty((steps, echoes, 1 + group), dtype=np.uint8)
     slot[:, :, 0] = ECHO_SEPARATOR
-    for position, values in enumerate(fields):
-        chars = np.frombuffer(encode_values(values.reshape(-1), width), dtype=np.uint8).reshape(steps, echoes, width)
-        slot[:, :, 1 + position * width : 1 + (position + 1) * width] = chars
+    slot[:, :, 1:] = encode_chars(fields, width).reshape(steps, echoes, group)
     present = ranges >= 0
     present[:, 0] = True
-    keep = np.repeat(present[:, :, None], 1 + group, axis=2)
+    keep = np.broadcast_to(present[:, :, None], slot.shape).copy()
     keep[:, 0, 0] = False  # no '&' before a step's first echo
     return slot[keep].tobytes()
 

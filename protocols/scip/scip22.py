@@ -27,7 +27,7 @@ from typing import Protocol
 import numpy as np
 
 from protocols.device import Output
-from protocols.scip.encoding import cluster_choice, data_lines, encode_steps, encode_values
+from protocols.scip.encoding import cluster_choice, data_lines, encode_steps, encode_value
 from protocols.scip.framing import Line, LineSplitter
 from protocols.scip.profiles import PROFILES, ScipProfile
 from protocols.scip.requests import SCAN_PARAMETER_CHARS, STREAM_PARAMETER_CHARS, ScanRequest, parse_scan_request
@@ -323,7 +323,7 @@ class Scip22Device(StreamingDevice):
             self._adjust_mode, self._laser_on, self._asleep = True, False, False
             return frame(echo, b"00")
         if params == b"1":
-            return frame(echo, b"00", checked_line(encode_values(np.array([self._timer_ms(now)]), 4)))
+            return frame(echo, b"00", checked_line(encode_value(self._timer_ms(now), 4)))
         if params == b"2":
             if not self._adjust_mode:
                 return frame(echo, b"03")
@@ -380,14 +380,15 @@ class Scip22Device(StreamingDevice):
         """Stamp line and data lines of the requested steps; a cluster reports its nearest step."""
         fmt = FORMATS[command]
         steps = slice(request.start, request.end + 1)
-        values = np.asarray(scan.values, dtype=np.int64)[steps]
-        chosen = cluster_choice(values, request.cluster) + request.start
+        chosen: slice | np.ndarray = steps  # unclustered: the steps themselves, read without copying an index
+        if request.cluster > 1:
+            chosen = cluster_choice(np.asarray(scan.values)[steps], request.cluster) + request.start
         if fmt.echoes and scan.echoes is not None:
-            ranges = np.asarray(scan.echoes, dtype=np.int64)[chosen, : self.profile.max_echoes]
-            source, shape = scan.echo_intensities, np.asarray(scan.echoes).shape
+            ranges = np.asarray(scan.echoes)[chosen, : self.profile.max_echoes]
+            source, shape = scan.echo_intensities, np.shape(scan.echoes)
         else:
-            ranges = np.asarray(scan.values, dtype=np.int64)[chosen]
-            source, shape = scan.intensities, np.asarray(scan.values).shape
+            ranges = np.asarray(scan.values)[chosen]
+            source, shape = scan.intensities, np.shape(scan.values)
         strengths = None
         if fmt.intensity:
             strengths = _intensity_of(source, shape)[chosen]
@@ -399,4 +400,4 @@ def _intensity_of(intensities: np.ndarray | None, shape: tuple[int, ...]) -> np.
     """A scan's intensities, or zeros where the scan carries none."""
     if intensities is None:
         return np.zeros(shape, dtype=np.int64)
-    return np.asarray(intensities, dtype=np.int64)
+    return np.asarray(intensities)

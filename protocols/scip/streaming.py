@@ -13,9 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
-from protocols.scip.encoding import checksum, encode_values
+from protocols.scip.encoding import checksum, encode_value
 from protocols.scip.requests import ScanRequest
 
 TIMER_MODULUS = 1 << 24  # the 24-bit millisecond timer
@@ -76,7 +74,7 @@ class StreamingDevice:
 
     def _stamp_line(self, stamp_ms: int) -> bytes:
         """A time stamp (ms since power-on) as the device's timer reads it: 4 characters and a sum."""
-        return checked_line(encode_values(np.array([(stamp_ms - self._epoch_ms) % TIMER_MODULUS]), 4))
+        return checked_line(encode_value((stamp_ms - self._epoch_ms) % TIMER_MODULUS, 4))
 
     # --- the stream -----------------------------------------------------------------
 

@@ -13,6 +13,8 @@ from protocols.scip.encoding import (
     cluster_minimum,
     data_lines,
     decode_values,
+    encode_steps,
+    encode_value,
     encode_values,
     join_data_lines,
     max_value,
@@ -119,3 +121,23 @@ def test_cluster_minimum_matches_a_plain_reference(values, cluster):
 
 def test_cluster_minimum_ignores_errors_unless_all_are_errors():
     assert cluster_minimum(np.array([0, 3000, 1200, 7, 19, 2]), 3).tolist() == [1200, 2]
+
+
+@given(st.integers(1, 4), st.integers(-(10**9), 10**9))
+def test_one_value_encodes_as_an_array_of_one(width, value):
+    assert encode_value(value, width) == encode_values(np.array([value]), width)
+
+
+@given(
+    hnp.arrays(np.int64, st.integers(0, 60), elements=st.integers(-1, 300_000)),
+    st.booleans(),
+)
+def test_single_echo_steps_are_range_then_intensity_per_step(ranges, with_intensity):
+    """The one-echo fast path against the plain definition: per step its range, then its intensity."""
+    intensities = (ranges * 7) % 5000 if with_intensity else None
+    expected = b"".join(
+        encode_values(np.array([value]), 3) + (b"" if intensities is None else encode_values(np.array([intensities[i]]), 3))
+        for i, value in enumerate(ranges)
+    )
+    assert encode_steps(ranges, intensities) == expected
+    assert encode_steps(ranges[:, None], None if intensities is None else intensities[:, None]) == expected
