@@ -48,6 +48,9 @@ class Scheduler:
         self._waiting: list[_Waiting] = []  # a heap
         self._order = itertools.count()
         self._computed: deque[tuple[float, float, int]] = deque()  # (finished at, wall s, instants) of recent jobs
+        # their sums, kept as jobs come and go: `spacing` is read on every scan handed out
+        self._computed_wall_s = 0.0
+        self._computed_instants = 0
         self._demand: dict[Any, tuple[float, float]] = {}  # stream → (instants per wall second, valid until)
 
     def __len__(self) -> int:
@@ -87,15 +90,19 @@ class Scheduler:
         """A worker computed `instants` in `wall_s` (from sending the job to its result)."""
         now = self._wall()
         self._computed.append((now, wall_s, max(1, instants)))
+        self._computed_wall_s += wall_s
+        self._computed_instants += max(1, instants)
         while self._computed and self._computed[0][0] < now - COST_WINDOW_S:
-            self._computed.popleft()
+            _, old_wall_s, old_instants = self._computed.popleft()
+            self._computed_wall_s -= old_wall_s
+            self._computed_instants -= old_instants
 
     @property
     def instant_cost_s(self) -> float | None:
         """Wall seconds a worker took per instant over the last COST_WINDOW_S (None before any job)."""
         if not self._computed:
             return None
-        return sum(wall for _, wall, _ in self._computed) / sum(instants for _, _, instants in self._computed)
+        return max(0.0, self._computed_wall_s) / self._computed_instants
 
     def demand(self, stream: Any, per_second: float, valid_s: float) -> None:
         """A stream wants `per_second` instants each wall second, for `valid_s` (wall) unless stated
