@@ -27,10 +27,14 @@ reported beside it, as the clients share the machine with the daemon.
 
 from __future__ import annotations
 
+import fcntl
 import os
 import selectors
 import socket
+import struct
+import sys
 import tempfile
+import termios
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -50,6 +54,12 @@ LMS_BAUD = 500_000
 LMS_EVERY_SCAN = build_telegram(0x00, b"\x20\x24")  # continuous output of every scan
 LMS_PERIOD_S = 2 / 75  # 0.5°: two mirror revolutions per scan; 732 bytes take 14.6 ms at 500 kBd
 ON_TIME_MS = 10.0
+# Linux socket(7): SO_TIMESTAMPNS stamps each received packet as the kernel queues it on the
+# socket (for loopback: within the daemon's send), and recvmsg hands the stamp of the last packet
+# read over as SCM_TIMESTAMPNS (a struct timespec, CLOCK_REALTIME). Python names neither.
+SO_TIMESTAMPNS = 35
+SCM_TIMESTAMPNS = SO_TIMESTAMPNS
+_TIMESPEC = struct.Struct("@ll")
 WARM_UP_S = 3.0
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 
@@ -121,13 +131,41 @@ def child_pids(pid: int) -> list[int]:
 
 @dataclass
 class _Stream:
-    """One client's MD stream: the arrival time and timestamp of each scan message."""
+    """One client's MD stream: when each scan message was sent and its timestamp.
+
+    "Sent" is the kernel's receive stamp of the message's last packet (SO_TIMESTAMPNS), taken as the
+    daemon's send puts it on the loopback: the figures are the daemon's, not this client's own
+    scheduling (one process reading 320 messages a second on a busy 2-core machine is often
+    late by milliseconds). Once a message's length is known, reads stop at its end, so a stamp is
+    never that of a later message read in the same call. A message read while the next one's bytes
+    were already queued (this client more than a period late on that stream) may carry the later
+    one's stamp (the kernel merges queued packets, keeping the newest stamp): such reads are counted
+    (`read_late`), and they can only make the daemon look later than it was."""
 
     sock: socket.socket
     buffer: bytes = b""
     echoed: bool = False
+    message_bytes: int | None = None  # a scan message's length, known from the first one
+    read_late: int = 0  # messages read with the next one already queued behind them
     arrivals: list[float] = field(default_factory=list)
     stamps: list[int] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+
+    def receive(self, realtime_to_monotonic: float) -> None:
+        wanted = self.message_bytes - len(self.buffer) if self.message_bytes and self.echoed else 65536
+        data, ancillary, _, _ = self.sock.recvmsg(max(wanted, 1), socket.CMSG_SPACE(_TIMESPEC.size))
+        if not data:
+            raise RuntimeError("the daemon closed a stream")
+        received = time.monotonic()
+        for level, kind, payload in ancillary:
+            if level == socket.SOL_SOCKET and kind == SCM_TIMESTAMPNS and len(payload) >= _TIMESPEC.size:
+                seconds, nanoseconds = _TIMESPEC.unpack_from(payload)
+                received = seconds + nanoseconds * 1e-9 - realtime_to_monotonic
+        if self.echoed and self.message_bytes and len(self.buffer) + len(data) == self.message_bytes:
+            self.read_late += _queued_bytes(self.sock) > 0
+        self.feed(data, received)
 
     def feed(self, data: bytes, now: float) -> None:
         self.buffer += data
@@ -136,12 +174,19 @@ class _Stream:
             if not self.echoed:
                 self.echoed = True
                 continue
+            self.message_bytes = self.message_bytes or len(message) + 2
             self.arrivals.append(now)
-            self.stamps.append(int(decode_values(message.split(b"\n")[2][:4], 4)[0]))
+            self.stamps.append(int(decode_values(message.split(b"\n", 3)[2][:4], 4)[0]))
 
     def forget(self) -> None:
         self.arrivals.clear()
         self.stamps.clear()
+        self.read_late = 0
+
+
+def _queued_bytes(sock: socket.socket) -> int:
+    """Bytes received and not yet read (FIONREAD)."""
+    return int.from_bytes(fcntl.ioctl(sock.fileno(), termios.FIONREAD, bytes(4)), sys.byteorder, signed=True)
 
 
 @dataclass
@@ -153,6 +198,12 @@ class _LmsStream:
     sock: socket.socket
     buffer: bytearray = field(default_factory=bytearray)
     arrivals: list[float] = field(default_factory=list)
+
+    def receive(self, realtime_to_monotonic: float) -> None:
+        data = self.sock.recv(65536)
+        if not data:
+            raise RuntimeError("the daemon closed a stream")
+        self.feed(data, time.monotonic())
 
     def feed(self, data: bytes, now: float) -> None:
         self.buffer += data
@@ -214,6 +265,7 @@ def _stream_all(
         stream.sock.setblocking(False)
         selector.register(stream.sock, selectors.EVENT_READ, stream)
     started = time.monotonic()
+    realtime_to_monotonic = time.time() - started  # the kernel stamps packets on CLOCK_REALTIME
     measure_from, measure_to = started + WARM_UP_S, started + WARM_UP_S + duration_s
     cpu_before = loop_before = None
     try:
@@ -225,10 +277,7 @@ def _stream_all(
                 for stream in everyone:  # the window starts here: forget the warm-up
                     stream.forget()
             for key, _ in selector.select(timeout=0.05):
-                data = key.fileobj.recv(65536)
-                if not data:
-                    raise RuntimeError("the daemon closed a stream")
-                key.data.feed(data, time.monotonic())
+                key.data.receive(realtime_to_monotonic)
         cpu = cpu_seconds(daemon.pid) - (cpu_before or 0.0), cpu_seconds(daemon.pid, children=False) - (loop_before or 0.0)
         if on_window is not None:
             on_window()
@@ -270,6 +319,7 @@ def _figures(
         "jitter_p99_ms": float(np.percentile(jitter, 99)),
         "lateness_p99_ms": float(np.percentile(late, 99)),
         "lateness_max_ms": float(np.max(late)),
+        "read_late": sum(stream.read_late for stream in streams),
         "cpu_ms_per_scan": cpu / scans * 1000.0 if scans else float("nan"),
         "daemon_cpu_ms_per_scan": daemon_cpu / scans * 1000.0 if scans else float("nan"),
         "cpu_cores": cpu / duration_s,

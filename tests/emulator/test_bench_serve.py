@@ -55,3 +55,33 @@ def test_ust_10lx_streams_are_counted_at_their_40_hz() -> None:
     assert 100 <= row["scans_received"] <= 140  # 2 sensors × 40/s × 1.5 s
     assert 0.8 <= row["rate"] <= 1.2
     assert 0 <= row["jitter_p50_ms"] <= row["jitter_p99_ms"]
+
+
+def test_a_scip_stream_is_timed_when_the_daemon_sent_each_message_not_when_the_client_read_it() -> None:
+    """Kernel receive stamps: a message read 60 ms after it was sent counts as arrived when sent."""
+    import time
+
+    from emulator.bench.serve_load import _Stream
+    from protocols.scip.encoding import encode_values
+
+    def message(stamp: int) -> bytes:
+        return b"MD0000108001000\n99b\n" + encode_values([stamp], 4) + b"x\n" + b"0" * 64 + b"0\n\n"
+
+    with socket.create_server(("127.0.0.1", 0)) as server:
+        client = socket.create_connection(server.getsockname())
+        sender, _ = server.accept()
+        with client, sender:
+            stream = _Stream(client)
+            offset = time.time() - time.monotonic()
+            sender.sendall(b"MD0000108001000\n00P\n\n" + message(100))
+            stream.receive(offset)  # the echo and the first message: the length is known from here on
+            sent = []
+            for stamp in (140, 180):
+                sent.append(time.monotonic())
+                sender.sendall(message(stamp))
+                time.sleep(0.06)
+                stream.receive(offset)
+    assert stream.stamps == [100, 140, 180]
+    for arrival, sent_at in zip(stream.arrivals[1:], sent):
+        assert sent_at - 0.001 <= arrival <= sent_at + 0.01  # not 60 ms later, when it was read
+    assert stream.read_late == 0
