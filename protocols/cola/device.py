@@ -23,7 +23,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from protocols.cola.framing import ColaReader, Dialect, Telegram, frame
-from protocols.cola.scandata import Channel, ScanHeader, scandata_values
+from protocols.cola.scandata import Channel, ScanHeader, scandata_arguments
 from protocols.device import Output
 from protocols.cola.values import (
     BadArguments,
@@ -203,7 +203,7 @@ class _Session:
     pending: list[Telegram] = field(default_factory=list)
 
 
-Handler = Callable[[bytes, Dialect, float], list[Value] | int]
+Handler = Callable[[bytes, Dialect, float], list[Value] | bytes | int]  # bytes: arguments already encoded
 
 
 class ColaDevice:
@@ -286,11 +286,11 @@ class ColaDevice:
         first = -(-first // interval) * interval
         outputs = []
         for index in range(first, latest + 1, interval):
-            sent, values = self._scandata_values(index, unit.scan_time(index))
+            sent, arguments = self._scandata(index, unit.scan_time(index), stream.dialect)
             if sent <= stream.last_sent:
                 continue  # a daemon that is behind hands out the freshest scan it has: sent already
             stream.last_sent = sent
-            payload = b"sSN LMDscandata " + encode(values, stream.dialect)
+            payload = b"sSN LMDscandata " + arguments
             outputs.append(_output(frame(payload, stream.dialect), droppable=True))
         stream.next_index = (latest // interval + 1) * interval
         return outputs
@@ -343,7 +343,7 @@ class ColaDevice:
         if isinstance(result, int):
             return self._error(result, dialect)
         head = answer_kind + b" " + name
-        body = encode(result, dialect) if result else b""
+        body = result if isinstance(result, bytes) else encode(result, dialect) if result else b""
         if result and (dialect is Dialect.ASCII or body):
             head += b" "
         return _output(frame(head + body, dialect))
@@ -493,11 +493,11 @@ class ColaDevice:
             return []
         return handler
 
-    def _one_scan(self, arguments: bytes, dialect: Dialect, now: float) -> list[Value] | int:
+    def _one_scan(self, arguments: bytes, dialect: Dialect, now: float) -> bytes | int:
         unit = self.unit
         if not unit.settings.measuring:
             return LOCAL_CONDITION_FAILED
-        return self._scandata_values(unit.scan_index(now), now)[1]
+        return self._scandata(unit.scan_index(now), now, dialect)[1]
 
     def _stream_scans(self, arguments: bytes, dialect: Dialect, now: float) -> list[Value] | int:
         (enable,) = decode(arguments, ("u8",), dialect)
@@ -511,8 +511,8 @@ class ColaDevice:
 
     # -- scan data ------------------------------------------------------------
 
-    def _scandata_values(self, index: int, now: float) -> tuple[int, list[Value]]:
-        """The telegram of scan `index` sent at `now`, and the index it carries: a scan source may hand
+    def _scandata(self, index: int, now: float, dialect: Dialect) -> tuple[int, bytes]:
+        """The arguments of scan `index`'s telegram sent at `now`, and the index it carries: a scan source may hand
         out another scan than the one asked (a daemon that is behind: its freshest), stamped with its own
         time, and the telegram then carries that scan's counter and times."""
         unit = self.unit
@@ -539,7 +539,7 @@ class ColaDevice:
             wide = settings.rssi_16_bits
             for channel_index, channel in enumerate(list(channels)):
                 column = int(channel.content[4:]) - 1
-                rssi = intensities[first:last + 1, column]
+                rssi = intensities[first:last + 1, column]  # type: ignore[index]
                 channels.append(Channel(f"RSSI{column + 1}", 1.0, start_ticks, settings.resolution_ticks,
                                         rssi if wide else np.minimum(rssi, 0xFF), wide))
         period = unit.period_s
@@ -557,27 +557,26 @@ class ColaDevice:
             device_name=model.device_ident if settings.device_name else None,
             time=_clock(now - unit.power_on_s) if settings.time else None,
         )
-        return index, scandata_values(header, channels)
+        return index, scandata_arguments(header, channels, dialect)
 
 
-def _selected_echoes(scan: ScanValues, settings: Settings, model: UnitModel) -> tuple[np.ndarray, np.ndarray]:
+def _selected_echoes(scan: ScanValues, settings: Settings, model: UnitModel) -> tuple[np.ndarray, np.ndarray | None]:
     """Distances and RSSI (N, channels) as the echo filter picks them: the first or the last echo
-    as DIST1, or every echo (DIST1..DISTE); 0 where a beam has no such echo."""
+    as DIST1, or every echo (DIST1..DISTE); 0 where a beam has no such echo (RSSI None unless asked)."""
     echoes = np.asarray(scan.echoes)[:, : model.echoes]
     powers = np.asarray(scan.echo_intensities)[:, : model.echoes]
     if settings.echo_filter == ECHO_ALL:
         chosen, chosen_power = echoes, powers
+    elif settings.echo_filter == ECHO_FIRST:
+        chosen, chosen_power = echoes[:, :1], powers[:, :1]
     else:
-        valid = echoes >= 0
-        if settings.echo_filter == ECHO_FIRST:
-            pick = np.zeros(len(echoes), np.intp)
-        else:
-            pick = np.maximum(valid.sum(axis=1) - 1, 0)
-        rows = np.arange(len(echoes))
-        chosen, chosen_power = echoes[rows, pick][:, None], powers[rows, pick][:, None]
-    distances = np.clip(np.where(chosen >= 0, chosen, 0), 0, 0xFFFF).astype(np.uint16)
-    rssi = np.clip(np.where(chosen >= 0, chosen_power, 0), 0, 0xFFFF).astype(np.uint16)
-    return distances, rssi
+        pick = np.maximum((echoes >= 0).sum(axis=1) - 1, 0)[:, None]
+        chosen, chosen_power = np.take_along_axis(echoes, pick, 1), np.take_along_axis(powers, pick, 1)
+    seen = chosen >= 0
+    distances = np.minimum(np.where(seen, chosen, 0), 0xFFFF).astype(np.uint16)
+    if not settings.rssi:
+        return distances, None
+    return distances, np.where(seen, np.clip(chosen_power, 0, 0xFFFF), 0).astype(np.uint16)
 
 
 def _micros(seconds: float) -> int:

@@ -1,11 +1,13 @@
-"""CoLa argument values: typed scalars, strings and arrays, as CoLa-A text or CoLa-B bytes.
+"""CoLa argument values: typed scalars and strings, as CoLa-A text or CoLa-B bytes; hex tokens of arrays.
 
 CoLa-A writes integers in upper-case hex without leading zeros (signed ones
 as their two's complement: -45° = -450000 = FFF92230), floats as the eight
 hex digits of their IEEE 754 bits, and a string with a length as `LEN TEXT`
 (the length in hex). A host may also write decimals with a sign (`+2500`,
 `-450000`). CoLa-B writes every value big-endian at its width, and a string
-with a length as a u16 length and its bytes.
+with a length as a u16 length and its bytes. LMDscandata, sent per scan, is
+written in one piece by protocols.cola.scandata (with `hex_tokens` for its
+channels in CoLa-A).
 """
 
 from __future__ import annotations
@@ -29,8 +31,7 @@ class BadArguments(ValueError):
 
 @dataclass(frozen=True)
 class Value:
-    """One argument: `kind` is a scalar kind of SCALARS, "f32", "raw" (bytes written as they
-    are: "DIST1"), "flex" (a string with its length) or "u8[]"/"u16[]" (a numpy array)."""
+    """One argument: `kind` is a scalar kind of SCALARS or "flex" (a string with its length)."""
 
     kind: str
     value: object
@@ -56,20 +57,8 @@ def i32(value: int) -> Value:
     return Value("i32", value)
 
 
-def f32(value: float) -> Value:
-    return Value("f32", value)
-
-
-def raw(text: str) -> Value:
-    return Value("raw", text.encode("ascii"))
-
-
 def flex(text: str) -> Value:
     return Value("flex", text.encode("ascii"))
-
-
-def array(values: np.ndarray, kind: str) -> Value:
-    return Value(kind, values)
 
 
 def _u16_table() -> tuple[np.ndarray, np.ndarray]:
@@ -87,6 +76,19 @@ def _u16_table() -> tuple[np.ndarray, np.ndarray]:
     return table, np.arange(5)[None, :] <= digits[:, None]
 
 
+def _u16_tokens() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`_u16_table`, built on first use, and each u16's token length (digits and space)."""
+    global _U16_TOKENS
+    if _U16_TOKENS is None:
+        table, own = _u16_table()
+        _U16_TOKENS = table, own, own.sum(axis=1)
+    return _U16_TOKENS
+
+
+def _fits_u16(values: np.ndarray) -> bool:
+    return values.dtype == np.uint16 or (int(values.max()) <= 0xFFFF and int(values.min()) >= 0)
+
+
 def hex_tokens(values: np.ndarray) -> bytes:
     """Non-negative integers as upper-case hex without leading zeros, each followed by a space
     (vectorised: u16 values read their tokens off a table; wider ones get their digits computed
@@ -94,11 +96,8 @@ def hex_tokens(values: np.ndarray) -> bytes:
     values = np.asarray(values)
     if values.size == 0:
         return b""
-    if int(values.max()) <= 0xFFFF and int(values.min()) >= 0:
-        global _U16_TOKENS
-        if _U16_TOKENS is None:
-            _U16_TOKENS = _u16_table()
-        table, own = _U16_TOKENS
+    if _fits_u16(values):
+        table, own, _ = _u16_tokens()
         index = values.astype(np.intp)
         return np.take(table, index, axis=0).ravel()[np.take(own, index, axis=0).ravel()].tobytes()
     values = values.astype(np.uint64)
@@ -114,7 +113,29 @@ def hex_tokens(values: np.ndarray) -> bytes:
     return chars[keep].tobytes()
 
 
-_U16_TOKENS: tuple[np.ndarray, np.ndarray] | None = None
+_U16_TOKENS: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+
+
+def hex_token_runs(arrays: list[np.ndarray]) -> list[bytes]:
+    """`hex_tokens` of each array without its last space, all u16 arrays read off the table in one
+    pass (a telegram's ten channels cost one numpy call, not ten)."""
+    arrays = [np.asarray(values) for values in arrays]
+    sized = [values for values in arrays if values.size]
+    if len(sized) < 2 or not all(_fits_u16(values) for values in sized):
+        return [hex_tokens(values)[:-1] for values in arrays]
+    table, own, lengths = _u16_tokens()
+    index = np.concatenate(sized).astype(np.intp)
+    text = np.take(table, index, axis=0).ravel()[np.take(own, index, axis=0).ravel()].tobytes()
+    ends = iter(np.cumsum(np.take(lengths, index))[np.cumsum([len(values) for values in sized]) - 1].tolist())
+    runs, start = [], 0
+    for values in arrays:
+        if not values.size:
+            runs.append(b"")
+            continue
+        end = next(ends)
+        runs.append(text[start:end - 1])
+        start = end
+    return runs
 
 
 def _digit_counts(values: np.ndarray) -> np.ndarray:
@@ -151,18 +172,8 @@ def _encode_ascii(values: list[Value]) -> bytes:
         kind = value.kind
         if kind in SCALARS:
             parts.append(_ascii_scalar(kind, int(value.value)))
-        elif kind == "f32":
-            parts.append(f"{struct.unpack('>I', struct.pack('>f', float(value.value)))[0]:08X}".encode("ascii"))
-        elif kind == "raw":
-            parts.append(value.value)
         elif kind == "flex":
             parts.append(f"{len(value.value):X} ".encode("ascii") + value.value)
-        elif kind.endswith("[]"):
-            tokens = hex_tokens(value.value)
-            if tokens:
-                parts.append(tokens[:-1])
-            else:
-                continue
         else:
             raise ValueError(f"unknown value kind {kind!r}")
     return b" ".join(parts)
@@ -172,16 +183,8 @@ def _binary(value: Value) -> bytes:
     kind = value.kind
     if kind in SCALARS:
         return struct.pack(">" + SCALARS[kind][0], int(value.value))
-    if kind == "f32":
-        return struct.pack(">f", float(value.value))
-    if kind == "raw":
-        return value.value
     if kind == "flex":
         return struct.pack(">H", len(value.value)) + value.value
-    if kind == "u8[]":
-        return np.asarray(value.value, dtype=np.uint8).tobytes()
-    if kind == "u16[]":
-        return np.asarray(value.value, dtype=">u2").tobytes()
     raise ValueError(f"unknown value kind {kind!r}")
 
 

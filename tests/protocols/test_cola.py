@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from protocols.cola import ColaDevice, ColaUnit, UnitModel
 from protocols.cola.framing import ColaReader, Dialect, checksum, frame
-from protocols.cola.values import hex_tokens
+from protocols.cola.values import hex_token_runs, hex_tokens
 
 TIM = UnitModel("TiM5xx", "TiM5xx", "V3.10", "12345678", -450000, 2250000, {1500: (3333,)}, (1500, 3333), 1, 1.0)
 LMS5 = UnitModel("LMS5xx", "LMS5xx", "V1.90", "1234", -50000, 1850000, {2500: (1667, 5000), 5000: (5000,)},
@@ -192,6 +192,14 @@ def test_hex_tokens(values):
     assert hex_tokens(np.array(values, dtype=np.uint64)) == b"".join(f"{v:X} ".encode() for v in values)
 
 
+@given(st.lists(st.lists(st.integers(0, 0xFFFF) | st.integers(0, 2**32 - 1), max_size=20), max_size=6),
+       st.sampled_from([np.uint16, np.uint32, np.int64]))
+def test_hex_token_runs_are_each_arrays_tokens(arrays, dtype):
+    arrays = [np.array(values, dtype=np.uint64).astype(dtype) if dtype is not np.uint16 or max(values, default=0) <= 0xFFFF
+              else np.array(values, dtype=np.uint64) for values in arrays]
+    assert hex_token_runs(arrays) == [" ".join(f"{v:X}" for v in values.tolist()).encode() for values in arrays]
+
+
 # -- LMDscandata -------------------------------------------------------------------
 
 
@@ -218,6 +226,14 @@ def decode_scandata(payload: bytes, dialect: Dialect) -> dict:
 
         def take_array(count: int, kind: str) -> list[int]:
             return [take(kind) for _ in range(count)]
+
+        def take_text() -> str:
+            nonlocal position
+            length = int(tokens[position], 16)
+            text = tokens[position + 1].decode()
+            position += 2
+            assert len(text) == length
+            return text
     else:
         data = payload.split(b" ", 2)[2]
         offset = 0
@@ -236,12 +252,19 @@ def decode_scandata(payload: bytes, dialect: Dialect) -> dict:
         def take_array(count: int, kind: str) -> list[int]:
             return [take(kind) for _ in range(count)]
 
+        def take_text() -> str:
+            nonlocal offset
+            length = struct.unpack_from(">H", data, offset)[0]
+            offset += 2 + length
+            return data[offset - length:offset].decode()
+
     fields = {}
     for name, kind in [("version", "u16"), ("device", "u16"), ("serial", "u32"), ("status1", "u8"), ("status2", "u8"),
                        ("telegram", "u16"), ("scan", "u16"), ("power_up_us", "u32"), ("transmission_us", "u32"),
                        ("in1", "u8"), ("in2", "u8"), ("out1", "u8"), ("out2", "u8"), ("reserved", "u16"),
                        ("frequency", "u32"), ("measurement_frequency", "u32"), ("encoders", "u16")]:
         fields[name] = take(kind)
+    fields["encoder"] = [(take("u32"), take("u16")) for _ in range(fields["encoders"])]
     channels = {}
     for width in ("u16", "u8"):
         for _ in range(take("u16")):
@@ -249,7 +272,11 @@ def decode_scandata(payload: bytes, dialect: Dialect) -> dict:
                                                            take("u16"), take("u16"))
             channels[content] = (scale, offset_, start, step, take_array(count, width))
     fields["channels"] = channels
-    fields["trailer"] = [take("u16") for _ in range(5)]
+    fields["position"] = take("u16")
+    fields["name"] = [take_text() for _ in range(take("u16"))]
+    fields["comment"] = take("u16")
+    fields["time"] = [tuple(take(kind) for kind in ("u16", "u8", "u8", "u8", "u8", "u8", "u32")) for _ in range(take("u16"))]
+    fields["events"] = take("u16")
     return fields
 
 
@@ -259,12 +286,13 @@ def streamed(dev: ColaDevice, now: float) -> list[bytes]:
 
 @given(dialect=st.sampled_from([Dialect.ASCII, Dialect.BINARY]), echo_filter=st.sampled_from([0, 1, 2]),
        channels=st.integers(1, 31), rssi=st.booleans(), wide=st.booleans(),
-       output=st.tuples(st.integers(-50000, 1850000), st.integers(-50000, 1850000)))
-@settings(max_examples=60, deadline=None)
-def test_scandata_reads_back_field_by_field(dialect, echo_filter, channels, rssi, wide, output):
+       output=st.tuples(st.integers(-50000, 1850000), st.integers(-50000, 1850000)),
+       encoder=st.booleans(), named=st.booleans(), clock=st.booleans())
+@settings(max_examples=80, deadline=None)
+def test_scandata_reads_back_field_by_field(dialect, echo_filter, channels, rssi, wide, output, encoder, named, clock):
     dev = device(LMS5)
     ask(dev, b"sMN SetAccessMode 03 F4724744", 0.0)
-    ask(dev, b"sWN LMDscandatacfg %X 0 %d %d 0 0 0 0 0 0 0 +1" % (channels, rssi, wide), 0.0)
+    ask(dev, b"sWN LMDscandatacfg %X 0 %d %d 0 %d 0 0 %d 0 %d +1" % (channels, rssi, wide, encoder, named, clock), 0.0)
     ask(dev, b"sWN FREchoFilter %d" % echo_filter, 0.0)
     start, stop = sorted(output)
     if start < stop:
@@ -300,7 +328,10 @@ def test_scandata_reads_back_field_by_field(dialect, echo_filter, channels, rssi
     for name in rssi_channels:
         values = fields["channels"][name][4]
         assert set(values) <= {0, 0x1234 if wide else 0xFF}
-    assert fields["trailer"] == [0, 0, 0, 0, 0]
+    assert fields["encoder"] == ([(0, 0)] if encoder else [])
+    assert fields["name"] == (["LMS5xx"] if named else [])
+    assert fields["time"] == ([(2000, 1, 1, 0, 0, 0, 500_000)] if clock else [])
+    assert (fields["position"], fields["comment"], fields["events"]) == (0, 0, 0)
 
 
 def test_streamed_telegrams_come_once_per_scan_in_the_dialect_asked():
