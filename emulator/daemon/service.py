@@ -50,6 +50,7 @@ from emulator.scene.model import Scene, SensorSpec
 from emulator.scene.sick_models import MODELS as SICK_MODELS
 from emulator.sensors import create_sensor, hokuyo_model, stream_batch
 from emulator.sensors.hokuyo import revolution_phase_ms
+from emulator.sensors.sick_cola import power_on_phase_ms
 from emulator.sensors.scan import Scan
 from emulator.transport.pty import PtyEndpoint
 from emulator.transport.rfc2217 import Rfc2217Endpoint
@@ -101,25 +102,25 @@ def simulated_sensors(scene: Scene, world: World | None = None) -> SensorFactory
 def build_device(spec: SensorSpec, scans: Callable[..., Scan], *, phase_ms: int = 0) -> Device:
     """The protocol device for the sensor's model, configured from its scene options.
     It powers on at simulated time 0: a URG stamp is the scan's simulated time in ms;
-    a Hokuyo's revolutions complete `phase_ms` past each period."""
+    a Hokuyo's revolutions complete `phase_ms` past each period; a CoLa unit powers on at `phase_ms`."""
     if spec.model not in DEVICE_OPTIONS:
         raise UserError(f"sensor {spec.name!r}: no protocol for model {spec.model!r}")
     options = {key: spec.options[key] for key in DEVICE_OPTIONS[spec.model] if key in spec.options}
     if spec.model == "urg-04lx":
         return UrgDevice(scans, **options, phase_ms=phase_ms)
     if spec.model in SICK_MODELS:
-        return ColaDevice(scans, cola_unit(spec, scans))
+        return ColaDevice(scans, cola_unit(spec, scans, phase_ms))
     if spec.model in SCIP22_PROFILES:
         return Scip22Device(scans, spec.model, **options, phase_ms=phase_ms)
     return Lms200Device(scans, **options)
 
 
-def cola_unit(spec: SensorSpec, scans: Callable[..., Scan]) -> ColaUnit:
-    """The CoLa unit behind a sensor's scan source, made at its first endpoint (powered on at 0 with the
-    scene's scan configuration)."""
+def cola_unit(spec: SensorSpec, scans: Callable[..., Scan], phase_ms: int = 0) -> ColaUnit:
+    """The CoLa unit behind a sensor's scan source, made at its first endpoint (powered on at `phase_ms`
+    with the scene's scan configuration)."""
     unit = _COLA_UNITS.get(scans)
     if unit is None:
-        unit = _COLA_UNITS[scans] = ColaUnit(unit_model(spec))
+        unit = _COLA_UNITS[scans] = ColaUnit(unit_model(spec), power_on_s=phase_ms / 1000)
     return unit
 
 
@@ -518,12 +519,14 @@ class Daemon:
             self._timer.call_later(delay, start)
 
     def _phase_ms(self, spec: SensorSpec) -> int:
-        """A simulated Hokuyo's revolution phase in its scene (a supplied scan source keeps phase 0: a replay's
-        scans lie where they were recorded)."""
-        model = hokuyo_model(spec.model)
-        if self._sensor_factory is not None or model is None:
+        """A simulated Hokuyo's revolution phase, or a CoLa unit's power-on instant, in its scene (a supplied
+        scan source keeps phase 0: a replay's scans lie where they were recorded)."""
+        if self._sensor_factory is not None:
             return 0
-        return revolution_phase_ms(self.scene, spec.name, model)
+        if spec.model in SICK_MODELS:
+            return power_on_phase_ms(self.scene, spec.name)
+        model = hokuyo_model(spec.model)
+        return 0 if model is None else revolution_phase_ms(self.scene, spec.name, model)
 
     def _origin(self, spec: SensorSpec, position: int) -> str:
         """Where an endpoint was asked for: `--endpoint urg` or `x.toml: sensors[0].endpoints[1]`."""

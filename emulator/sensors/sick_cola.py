@@ -12,6 +12,7 @@ come from scene.sick_models (docs/cola.md cites them).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
@@ -31,6 +32,7 @@ from emulator.sensors.scan import Scan, simulated_instant
 FIELD_BITS = 17
 FIELD_CODES_FROM = (1 << FIELD_BITS) - 9
 REFERENCE_RANGE_M = 2.5  # the receivers' reference target: white paper at 2.5 m
+GOLDEN_FRACTION = (math.sqrt(5.0) - 1.0) / 2.0
 
 
 def device_angles_deg(model: SickModel, resolution_ticks: int) -> np.ndarray:
@@ -44,6 +46,18 @@ def beam_offsets_s(model: SickModel, device_angles: np.ndarray, period_s: float)
     offsets = -(model.stop_deg - np.asarray(device_angles, dtype=float)) / 360.0 * period_s
     offsets.flags.writeable = False
     return offsets
+
+
+def power_on_phase_ms(scene: Scene, name: str) -> int:
+    """When CoLa unit `name` powered on, in whole ms past simulated time 0 (less than its configured period):
+    the i-th CoLa unit of the scene (scene order, any model) at the fraction i·φ mod 1 of its period
+    (φ = 0.618…, the golden ratio's). Real units are not switched on together; a daemon serving many then
+    sends their telegrams spread over time rather than all at one instant, units of different periods
+    rarely coincide, and every daemon given the scene agrees on each unit's scan instants."""
+    units = [spec for spec in scene.sensors if spec.model in MODELS]
+    index = [spec.name for spec in units].index(name)
+    period_ms = 1000.0 * FREQUENCY_TICKS_PER_HZ / configured_request(units[index].options)["frequency_ticks"]
+    return int((index * GOLDEN_FRACTION) % 1.0 * period_ms)
 
 
 def configured_request(options: Mapping[str, Any]) -> dict[str, Any]:
@@ -74,6 +88,7 @@ class ColaSensor:
         self.mount = SensorMount(scene, spec, world.bodies)
         self._fixed_spec = self.mount.fixed_spec
         self._windows: dict[tuple[int, int], _Window] = {}
+        self.configured_phase_s = power_on_phase_ms(scene, spec.name) / 1000  # scans complete at phase + k · period
 
     @property
     def period_s(self) -> float:
@@ -167,8 +182,6 @@ class ColaSensor:
     def configured_scan(self, time_s: float) -> Scan:
         """The scan the scene's options select (`configured_request`), at `time_s`."""
         return self.scan(time_s, **configured_request(self.spec.options))
-
-    configured_phase_s = 0.0  # scans complete at k · period after power-on
 
     @property
     def configured_period_s(self) -> float:
