@@ -14,11 +14,13 @@ from emulator.optics.puffs import Puffs, cross_beams, erf, normal_cdf
 from emulator.scene.material_optics import BUILTIN_OPTICS, patch_values
 from emulator.scene.materials import BUILTIN_MATERIALS
 from emulator.scene.plumes import Particles
+from emulator.sensors.physical import echo_kernels
 from emulator.sensors.physical.echo import (
     lms_first_echo,
     log_target_echo,
     log_threshold,
     range_law,
+    reference_spreading,
     smoke_bin_echo,
 )
 from emulator.sensors.physical.noise import (
@@ -196,3 +198,25 @@ def test_fluctuations_are_strongest_on_smoke_edges_and_have_median_one():
     assert abs(np.median(field)) < 0.1 and field.std() == pytest.approx(1.0, abs=0.15)
     off = fluctuation_factor(9, "lms", angles, (1.0,), column, np.full(121, 3.0), dataclasses.replace(DEFAULT_PARAMS, fluctuation=False))
     assert np.all(off == 1.0)
+
+
+def test_the_compiled_smoke_bins_are_the_formulas_bit_for_bit():
+    """`echo_kernels.smoke_bin_powers` (what `beam_physics_at` runs) against `smoke_bin_echo` and the
+    share's formula in numpy, with and without a gain ramp."""
+    rng = np.random.default_rng(5)
+    rows, edges = 40, 9
+    path = np.cumsum(rng.exponential(0.002, (rows, edges)), axis=1)
+    low, length = rng.uniform(0.1, 5.0, rows), rng.uniform(0.5, 20.0, rows)
+    middles = np.sort(rng.uniform(0.0, 1.0, edges - 1))
+    per_path = rng.uniform(1.0, 50.0, edges - 1)
+    for receiver in (DEFAULT_PARAMS.urg, DEFAULT_PARAMS.lms):
+        transmission = np.exp(path * -500.0)
+        amp, mid = echo_kernels.smoke_bin_powers(
+            path, transmission, low, length, per_path, middles, 3.0, receiver.overlap_m**2, receiver.gain_ramp_m,
+            reference_spreading(DEFAULT_PARAMS.reference_range_m, receiver.overlap_m, receiver.gain_ramp_m),
+        )
+        scattering = (path[:, 1:] - path[:, :-1]) * per_path * (1.0 / length)[:, None]
+        share = (scattering * scattering * scattering + 1.0) * 3.0
+        expected_mid = low[:, None] + length[:, None] * middles
+        np.testing.assert_array_equal(mid, expected_mid)
+        np.testing.assert_array_equal(amp, smoke_bin_echo(transmission, share, expected_mid, receiver, DEFAULT_PARAMS))

@@ -25,7 +25,8 @@ from emulator.optics.kept import KeptPerArrays
 from emulator.optics.puffs import BeamPuffCrossings, Puffs, cross_beams
 from emulator.scene.material_optics import optics_for, patch_values
 from emulator.sensors.beam_geometry import scan_plane_rays
-from emulator.sensors.physical.echo import echoing, log_clear_air_echo, smoke_bin_echo
+from emulator.sensors.physical import echo_kernels
+from emulator.sensors.physical.echo import echoing, log_clear_air_echo, reference_spreading
 from emulator.sensors.physical.noise import fluctuation_factor
 from emulator.sensors.physical.params import PhysicalParams, ReceiverOptics
 from emulator.sensors.response import Beams
@@ -569,17 +570,17 @@ def _smoke_echoes(
     path = _region_path_to(instants, rows, edges)
     path += crossings.optical_path_on_grid(rows, low, length, grid.fractions)
     path *= factor.take(rows)[:, None]
-    # each bin's mean extinction over its width, length × the bin's fraction of the extent
-    scattering = path[:, 1:] - path[:, :-1]
-    scattering *= grid.inverse_widths * (extinction / params.multiple_scattering_extinction)
-    scattering *= (1.0 / length)[:, None]
-    share = scattering * scattering
-    share *= scattering
-    share += 1.0
-    share *= receiver.volume_gain * params.backscatter_ratio  # raised by multiple scattering in dense smoke
-    transmission = np.exp(path * (-2.0 * extinction))
-    mid = low[:, None] + length[:, None] * grid.middles
-    return SmokeEchoes(rows, smoke_bin_echo(transmission, share, mid, receiver, params), mid, edges, grid.fractions)
+    transmission = path * (-2.0 * extinction)
+    np.exp(transmission, out=transmission)
+    overlap_m, gain_ramp_m = receiver.overlap_m, receiver.gain_ramp_m
+    amp, mid = echo_kernels.smoke_bin_powers(
+        path, transmission, low, length,
+        grid.inverse_widths * (extinction / params.multiple_scattering_extinction),  # bin widths as fractions of the extent
+        grid.middles,
+        receiver.volume_gain * params.backscatter_ratio,  # raised by multiple scattering in dense smoke
+        overlap_m**2, gain_ramp_m, reference_spreading(params.reference_range_m, overlap_m, gain_ramp_m),
+    )
+    return SmokeEchoes(rows, amp, mid, edges, grid.fractions)
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,7 @@ from emulator.sensors.physical.params import (
 def range_law(range_m: np.ndarray, receiver: ReceiverOptics, params: PhysicalParams) -> np.ndarray:
     """G(u): inverse-square spreading × transmitter/receiver overlap × gain ramp, 1 at the reference range."""
     overlap_m, gain_ramp_m = receiver.overlap_m, receiver.gain_ramp_m
-    return _spreading(range_m, overlap_m, gain_ramp_m) / _reference_spreading(params.reference_range_m, overlap_m, gain_ramp_m)
+    return _spreading(range_m, overlap_m, gain_ramp_m) / reference_spreading(params.reference_range_m, overlap_m, gain_ramp_m)
 
 
 def _spreading(range_m: np.ndarray | float, overlap_m: float, gain_ramp_m: float) -> np.ndarray:
@@ -43,7 +43,7 @@ def _spreading(range_m: np.ndarray | float, overlap_m: float, gain_ramp_m: float
 
 
 @functools.lru_cache(maxsize=16)
-def _reference_spreading(reference_range_m: float, overlap_m: float, gain_ramp_m: float) -> float:
+def reference_spreading(reference_range_m: float, overlap_m: float, gain_ramp_m: float) -> float:
     """The range law's normaliser: the same for every scan, so computed once."""
     return float(_spreading(reference_range_m, overlap_m, gain_ramp_m))
 
@@ -97,7 +97,8 @@ def smoke_bin_echo(
     receiver: ReceiverOptics,
     params: PhysicalParams,
 ) -> np.ndarray:
-    """Backscattered power per range bin (N, M) from two-way transmissions at the bin edges (N, M+1)."""
+    """Backscattered power per range bin (N, M) from two-way transmissions at the bin edges (N, M+1).
+    The scans run it compiled, fused with the share (`echo_kernels.smoke_bin_powers`, tested equal)."""
     extinguished = transmission_edges[:, :-1] - transmission_edges[:, 1:]
     return 0.5 * backscatter_share * extinguished * range_law(mid_m, receiver, params)
 

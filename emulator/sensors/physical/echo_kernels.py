@@ -218,3 +218,40 @@ def kept_echoes(
                 seen += 1
         count[r] = min(seen, max_echoes)
     return out_ranges, out_powers, count
+
+
+@njit(**_COMPILE)
+def smoke_bin_powers(
+    path: np.ndarray,
+    transmission: np.ndarray,
+    low_m: np.ndarray,
+    length_m: np.ndarray,
+    scattering_per_path: np.ndarray,
+    middles: np.ndarray,
+    share_gain: float,
+    overlap_squared: float,
+    gain_ramp_m: float,
+    reference_spreading: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each smoke bin's backscattered power and its middle's range, (R, M), from the optical path and
+    two-way transmission at the bin edges (R, M+1), as `beams._smoke_echoes` and `echo.smoke_bin_echo`
+    define them: the share (1 + mean extinction³ · `scattering_per_path` per bin) × `share_gain`, half
+    the power extinguished in the bin, the range law at its middle."""
+    rows, edges = path.shape
+    bins = edges - 1
+    powers = np.empty((rows, bins))
+    mid_m = np.empty((rows, bins))
+    for r in range(rows):
+        per_length = 1.0 / length_m[r]
+        for i in range(bins):
+            scattering = (path[r, i + 1] - path[r, i]) * scattering_per_path[i] * per_length
+            share = (scattering * scattering * scattering + 1.0) * share_gain
+            u = low_m[r] + length_m[r] * middles[i]
+            mid_m[r, i] = u
+            spreading = u * u
+            spreading /= (spreading + overlap_squared) * (spreading + overlap_squared)
+            if gain_ramp_m > 0:
+                ramp = min(u / gain_ramp_m, 1.0)
+                spreading *= ramp * ramp
+            powers[r, i] = 0.5 * share * (transmission[r, i] - transmission[r, i + 1]) * (spreading / reference_spreading)
+    return powers, mid_m
