@@ -21,23 +21,17 @@ _COMPILE = {"cache": True, "nogil": True, "error_model": "numpy"}
 
 
 @njit(**_COMPILE)
-def strong_rows(amp: np.ndarray, edges_m: np.ndarray, separation_m: float, threshold: float) -> np.ndarray:
-    """Rows whose densest bin holds the threshold within a pulse length (the others return nothing)."""
-    rows, bins = amp.shape
-    keep = np.empty(rows, dtype=np.intp)
-    count = 0
-    for r in range(rows):
-        densest = 0.0  # `initial=0.0`; a NaN anywhere makes the row's maximum NaN, as numpy's
-        for i in range(bins):
-            density = amp[r, i] / (edges_m[r, i + 1] - edges_m[r, i])
-            if density != density or densest != densest:
-                densest = np.nan
-            elif density > densest:
-                densest = density
-        if densest * separation_m >= threshold * (1.0 - 1e-9):
-            keep[count] = r
-            count += 1
-    return keep[:count]
+def _is_strong(amp: np.ndarray, edges_m: np.ndarray, r: int, separation_m: float, threshold: float) -> bool:
+    """Whether row `r`'s densest bin holds the threshold within a pulse length (no other row returns anything:
+    the cumulative is linear within bins)."""
+    densest = 0.0  # numpy's max(..., initial=0.0): a NaN anywhere makes the maximum NaN
+    for i in range(amp.shape[1]):
+        density = amp[r, i] / (edges_m[r, i + 1] - edges_m[r, i])
+        if density != density or densest != densest:
+            densest = np.nan
+        elif density > densest:
+            densest = density
+    return densest * separation_m >= threshold * (1.0 - 1e-9)
 
 
 @njit(**_COMPILE)
@@ -76,8 +70,8 @@ def smoke_runs(
     threshold: float,
     near_m: float,
     near_threshold: float,
-) -> tuple[np.ndarray, np.ndarray, int]:
-    """Each row's smoke returns: (ranges (R, P) inf past its last, powers (R, P) 0 past it, J = the most returns of a row).
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each row's smoke returns: ranges (R, J) inf past its last, powers (R, J) 0 past it; J = the most of a row.
 
     The signal (backscatter of the last pulse length) is sampled at the grid's edges and a pulse length
     past each, in range order (ties: the edge first); each run of samples at or above the level
@@ -86,8 +80,11 @@ def smoke_runs(
     """
     rows, edges = edges_m.shape
     samples = 2 * edges
-    ranges = np.full((rows, edges), np.inf)  # a row's runs alternate with gaps between its 2 (M+1) samples
-    powers = np.zeros((rows, edges))
+    # each row's returns in turn (a row's runs alternate with gaps between its 2 (M+1) samples: at most M+1)
+    found_ranges = np.empty(rows * edges)
+    found_powers = np.empty(rows * edges)
+    first = np.zeros(rows + 1, dtype=np.intp)
+    found = 0
     cumulative = np.empty(edges)
     ending = np.empty(edges)  # the window ending at each edge
     past = np.empty(edges)  # the window ending a pulse length past each edge
@@ -96,6 +93,9 @@ def smoke_runs(
     most = 0
     lowest = min(threshold, near_threshold)
     for r in range(rows):
+        first[r] = found
+        if not _is_strong(amp, edges_m, r, separation_m, threshold):
+            continue
         cumulative[0] = 0.0
         for i in range(edges - 1):
             cumulative[i + 1] = cumulative[i] + amp[r, i]
@@ -116,7 +116,6 @@ def smoke_runs(
                 earlier += 1
             points[j + earlier] = point
             signals[j + earlier] = past[j]
-        run = -1
         strongest = 0.0
         was_above = False
         for k in range(samples):
@@ -124,39 +123,53 @@ def smoke_runs(
             level = near_threshold if points[k] < near_m else threshold
             above = signal >= level
             if above and not was_above:
-                if run >= 0:
-                    powers[r, run] = strongest
-                run += 1
+                if found > first[r]:
+                    found_powers[found - 1] = strongest
                 strongest = signal
                 if k == 0:
-                    ranges[r, run] = points[0] + 0.0 * (points[0] - points[0])
+                    found_ranges[found] = points[0] + 0.0 * (points[0] - points[0])
                 else:
                     part = min(max((level - signals[k - 1]) / (signal - signals[k - 1]), 0.0), 1.0)
-                    ranges[r, run] = points[k - 1] + part * (points[k] - points[k - 1])
+                    found_ranges[found] = points[k - 1] + part * (points[k] - points[k - 1])
+                found += 1
             elif above and signal > strongest:
                 strongest = signal
             was_above = above
-        if run >= 0:
-            powers[r, run] = strongest
-        most = max(most, run + 1)
-    return ranges, powers, most
+        if found > first[r]:
+            found_powers[found - 1] = strongest
+            most = max(most, found - first[r])
+    first[rows] = found
+    ranges = np.full((rows, most), np.inf)
+    powers = np.zeros((rows, most))
+    for r in range(rows):
+        for j in range(first[r + 1] - first[r]):
+            ranges[r, j] = found_ranges[first[r] + j]
+            powers[r, j] = found_powers[first[r] + j]
+    return ranges, powers
 
 
 @njit(**_COMPILE)
 def kept_echoes(
     ranges_m: np.ndarray,
     powers: np.ndarray,
+    smoke_of: np.ndarray,
+    smoke_ranges_m: np.ndarray,
+    smoke_powers: np.ndarray,
     separation_m: float,
     threshold: float,
     near_m: float,
     near_threshold: float,
     max_echoes: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The echo lists of rows' candidate returns (N, C) in any order (absent: power 0): sorted by range,
+    """The echo lists of rows' candidate returns in any order (absent: power 0): each row's (N, S) and,
+    for a row r with `smoke_of[r]` ≥ 0, that row of the smoke's (R, J), after them. Sorted by range,
     merged where closer than `separation_m` (powers add, range their power-weighted mean; a lone return
     keeps its own range), those below the level dropped, the first `max_echoes` kept.
     Returns ranges (N, E) NaN past each row's count, powers (N, E) 0 past it, count (N,)."""
-    n, candidates = ranges_m.shape
+    n, own = ranges_m.shape
+    candidates = own + smoke_ranges_m.shape[1]
+    row_ranges = np.empty(candidates)
+    row_powers = np.empty(candidates)
     out_ranges = np.full((n, max_echoes), np.nan)
     out_powers = np.zeros((n, max_echoes))
     count = np.zeros(n, dtype=np.int64)
@@ -165,20 +178,31 @@ def kept_echoes(
     merged = np.empty(candidates)
     power = np.empty(candidates)
     for r in range(n):
+        smoke = smoke_of[r]
+        for c in range(candidates):
+            if c < own:
+                row_ranges[c] = ranges_m[r, c]
+                row_powers[c] = powers[r, c]
+            elif smoke >= 0:
+                row_ranges[c] = smoke_ranges_m[smoke, c - own]
+                row_powers[c] = smoke_powers[smoke, c - own]
+            else:
+                row_ranges[c] = np.inf
+                row_powers[c] = 0.0
         present = 0
         only = 0
         for c in range(candidates):
-            if powers[r, c] > 0:
+            if row_powers[c] > 0:
                 if present == 0:
                     only = c
                 present += 1
         groups = 1
         if present <= 1:
-            merged[0] = ranges_m[r, only] if present else np.inf
-            power[0] = powers[r, only] if present else 0.0
+            merged[0] = row_ranges[only] if present else np.inf
+            power[0] = row_powers[only] if present else 0.0
         else:
             for c in range(candidates):  # a stable insertion sort by range, absent returns last
-                key = ranges_m[r, c] if powers[r, c] > 0 else np.inf
+                key = row_ranges[c] if row_powers[c] > 0 else np.inf
                 k = c
                 while k > 0 and keys[k - 1] > key:
                     keys[k] = keys[k - 1]
@@ -191,9 +215,10 @@ def kept_echoes(
             moment = 0.0
             last = 0.0
             for k in range(candidates):
-                amp = powers[r, order[k]]
+                amp = row_powers[order[k]]
                 here = amp > 0
-                range_here = ranges_m[r, order[k]] if here else np.inf
+                amp = amp if here else 0.0
+                range_here = row_ranges[order[k]] if here else np.inf
                 if k == 0 or not (range_here - last < separation_m):
                     if groups and members > 1:
                         merged[groups - 1] = moment / power[groups - 1]

@@ -107,17 +107,11 @@ def echo_lists_at(hits: Sequence[BeamHits], beams: Sequence[Beams], receiver: Pu
     scene = instants.beams.scene
     threshold = float(np.exp(log_threshold(receiver, params, scene.density_to_extinction)))
     physics = beam_physics_at(instants, receiver, params)
-    surfaces = physics.surfaces
-    smoke_ranges, smoke_powers = smoke_returns(physics.smoke, receiver, threshold, fog_filter)
-    rows = len(surfaces.amp)
-    ranges = np.where(surfaces.amp > 0, surfaces.range_m, np.inf)
-    powers = surfaces.amp
-    if smoke_ranges.shape[1]:
-        extra_ranges = np.full((rows, smoke_ranges.shape[1]), np.inf)
-        extra_powers = np.zeros((rows, smoke_ranges.shape[1]))
-        extra_ranges[physics.smoke.rows], extra_powers[physics.smoke.rows] = smoke_ranges, smoke_powers
-        ranges, powers = np.concatenate([ranges, extra_ranges], axis=1), np.concatenate([powers, extra_powers], axis=1)
-    lists = select_echoes(ranges, powers, threshold, receiver, fog_filter=fog_filter)
+    surfaces, smoke = physics.surfaces, physics.smoke
+    smoke_ranges, smoke_powers = smoke_returns(smoke, receiver, threshold, fog_filter)
+    smoke_of = np.full(len(surfaces.amp), -1, dtype=np.intp)  # each row's row of the smoke's returns
+    smoke_of[smoke.rows] = np.arange(len(smoke.rows))
+    lists = _selected(surfaces.range_m, surfaces.amp, smoke_of, smoke_ranges, smoke_powers, threshold, receiver, fog_filter)
     if params.noise and receiver.range_sigma_m > 0:
         per_scan = instants.beam_count * receiver.max_echoes
         normals = scan_normals(scene.seed, instants.beams.sensor.name, instants.times_s, per_scan).reshape(lists.ranges_m.shape)
@@ -144,20 +138,12 @@ def smoke_returns(smoke: SmokeEchoes, receiver: PulsedReceiver, threshold: float
     among them); each run of samples at or above the detection level is a return, placed where the
     signal first reaches it (linear between samples) with the run's strongest sample as its power.
     """
-    rows = len(smoke.amp)
-    # a pulse length holds at most the densest bin's energy per metre times its length (the cumulative is
-    # linear within bins): only rows where that reaches the threshold can return anything
-    strong = echo_kernels.strong_rows(smoke.amp, smoke.edges_m, receiver.separation_m, threshold)
-    if len(strong) == 0:
-        return np.full((rows, 0), np.inf), np.zeros((rows, 0))
     near_m, near_threshold = _near_level(threshold, receiver, fog_filter)
-    ranges, powers, most = echo_kernels.smoke_runs(
-        smoke.amp.take(strong, axis=0), smoke.edges_m.take(strong, axis=0), smoke.fractions, receiver.separation_m,
-        threshold, near_m, near_threshold,
+    # only rows whose densest bin holds the threshold within a pulse length can return anything (the
+    # cumulative is linear within bins)
+    return echo_kernels.smoke_runs(
+        smoke.amp, smoke.edges_m, smoke.fractions, receiver.separation_m, threshold, near_m, near_threshold
     )
-    all_ranges, all_powers = np.full((rows, most), np.inf), np.zeros((rows, most))
-    all_ranges[strong], all_powers[strong] = ranges[:, :most], powers[:, :most]
-    return all_ranges, all_powers
 
 
 def select_echoes(ranges_m: np.ndarray, powers: np.ndarray, threshold: float, receiver: PulsedReceiver,
@@ -165,8 +151,16 @@ def select_echoes(ranges_m: np.ndarray, powers: np.ndarray, threshold: float, re
     """The echo lists (N, E) of N beams' candidate returns (N, C) in any order (absent ones: range inf,
     power 0): returns closer than `separation_m` merge, those below the detection level are dropped,
     and of the rest a unit keeping E echoes reports the first E it receives (the nearest)."""
+    no_smoke = np.full(len(ranges_m), -1, dtype=np.intp)
+    return _selected(ranges_m, powers, no_smoke, np.zeros((0, 0)), np.zeros((0, 0)), threshold, receiver, fog_filter)
+
+
+def _selected(ranges_m: np.ndarray, powers: np.ndarray, smoke_of: np.ndarray, smoke_ranges_m: np.ndarray,
+              smoke_powers: np.ndarray, threshold: float, receiver: PulsedReceiver, fog_filter: bool) -> EchoLists:
+    """`select_echoes` of each row's candidates (N, C) followed by its row `smoke_of` (-1: none) of the
+    smoke's returns (R, J), without building the (N, C + J) candidates."""
     near_m, near_threshold = _near_level(threshold, receiver, fog_filter)
     return EchoLists(*echo_kernels.kept_echoes(
-        np.ascontiguousarray(ranges_m, dtype=float), np.ascontiguousarray(powers, dtype=float), receiver.separation_m,
-        threshold, near_m, near_threshold, receiver.max_echoes,
+        np.ascontiguousarray(ranges_m, dtype=float), np.ascontiguousarray(powers, dtype=float), smoke_of,
+        smoke_ranges_m, smoke_powers, receiver.separation_m, threshold, near_m, near_threshold, receiver.max_echoes,
     ))
