@@ -22,11 +22,11 @@ from emulator.optics.fans import dot_rows
 from emulator.optics.puffs import (
     _BLOCK_MARGIN,
     BEAMS_PER_BLOCK,
-    REACH_SIGMAS,
     BeamPuffCrossings,
     Puffs,
     cross_beams,
     crossings_of_candidates,
+    reach_sigmas,
 )
 
 
@@ -46,7 +46,7 @@ def cross_instants(
     n = len(origins) // count if count else 0
     if n == 0:
         empty = np.zeros(0)
-        return BeamPuffCrossings(np.zeros(0, dtype=np.int64), empty, empty, empty, empty)
+        return BeamPuffCrossings(np.zeros(0, dtype=np.int64), empty, empty, empty, empty, np.zeros(0, dtype=bool))
     with np.errstate(invalid="ignore"):  # 0 × an endless beam: NaN, and that instant is crossed alone
         ends = origins + directions * beam_end_m[:, None]
     several_origins = (origins.reshape(count, n, 3) != origins[::n][:, None, :]).any(axis=(1, 2))
@@ -72,7 +72,7 @@ def cross_instants(
     return BeamPuffCrossings(*(np.concatenate([getattr(piece, name) for piece in pieces]) for name in _FIELDS))
 
 
-_FIELDS = ("beam", "along_m", "sigma", "column", "before_origin")
+_FIELDS = ("beam", "along_m", "sigma", "column", "before_origin", "near")
 
 
 def _same_beams(origins: np.ndarray, directions: np.ndarray, beam_end_m: np.ndarray, n: int, instants: np.ndarray) -> list[list[int]]:
@@ -98,7 +98,7 @@ def _cross_together(
     puffs = Puffs.concatenate(list(parts))
     sizes = np.array([len(part) for part in parts], dtype=np.int64)
     instant_of_puff = np.arange(count).repeat(sizes)
-    reach_of_puff = REACH_SIGMAS * puffs.sigma
+    reach_of_puff = np.repeat([reach_sigmas(part.central_column) for part in parts], sizes) * puffs.sigma  # each instant's own
     low_ends, high_ends = np.minimum(origins, ends), np.maximum(origins, ends)
     # cross_beams' first cut, per instant: spheres wholly outside the box bounding all of its segments
     instant_starts = np.arange(0, count * n, n)

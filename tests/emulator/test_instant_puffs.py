@@ -12,7 +12,7 @@ import pytest
 from emulator.optics.instant_puffs import cross_instants
 from emulator.optics.puffs import BeamPuffCrossings, Puffs, cross_beams
 
-FIELDS = ("beam", "along_m", "sigma", "column", "before_origin")
+FIELDS = ("beam", "along_m", "sigma", "column", "before_origin", "near")
 
 
 def _by_beam(crossings: BeamPuffCrossings) -> list[np.ndarray]:
