@@ -627,6 +627,10 @@ class Daemon:
             # every how many revolutions each stream is computed, in % (100: every one; the workers keep up)
             "spacing_pct": round(100 * self.pool.spacing) if self.pool is not None else 100,
             "instants_dropped": sum(cache.dropped for cache in self.scan_caches.values()),
+            # scan jobs the workers computed and their instants (of which `served` went out)
+            "jobs_computed": self.pool.jobs_computed if self.pool is not None else 0,
+            "instants_computed": self.pool.instants_computed if self.pool is not None else 0,
+            "served_scans": sum(cache.served for cache in self.scan_caches.values()),
             "tasks": len(asyncio.all_tasks()),
             "fds": len(os.listdir("/proc/self/fd")),
             "wakes": timer.wakes if timer is not None else 0,

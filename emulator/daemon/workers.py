@@ -218,6 +218,8 @@ class WorkerPool:
         self._lock = threading.Lock()
         self._on_restart = on_restart
         self._closed = False
+        self.jobs_computed = 0  # scan jobs a worker finished, and the instants they held (the bench's job sizes)
+        self.instants_computed = 0
 
     @property
     def pids(self) -> list[int]:
@@ -381,6 +383,8 @@ class WorkerPool:
                 job = worker.jobs.pop(job_id, None)
                 if job is not None and kind == "done" and job.message[0] in ("scan", "scans"):
                     instants = 1 if job.message[0] == "scan" else len(job.message[3])
+                    self.jobs_computed += 1
+                    self.instants_computed += instants
                     done = time.monotonic()  # its worker's time on it: from when it was sent or the job before came back
                     self._scheduler.computed(instants, done - max(job.sent_at, worker.last_done))
                     worker.last_done = done

@@ -325,3 +325,25 @@ def test_kept_values_follow_the_identity_of_read_only_arrays():
     kept.get((writeable,), "a", lambda: compute(writeable))
     writeable[0] = 5.0  # never kept: a change is seen
     assert kept.get((writeable,), "a", lambda: compute(writeable)) == 7.0 and len(calls) == 5
+
+
+def test_kept_values_outlast_a_fleet_round_and_go_with_their_arrays():
+    """A worker computes every sensor of a fleet in turn: a store that holds fewer values than the
+    fleet loses each one before its sensor comes round; when full it drops the oldest, and a value
+    goes as soon as its arrays die."""
+    from emulator.optics.kept import KEPT_VALUES, KeptPerArrays
+
+    assert KEPT_VALUES >= 3 * 256  # a few values for every sensor of the largest scene
+    kept, calls = KeptPerArrays(size=3), []
+    fleet = [np.full(4, float(index)) for index in range(4)]
+    for array in fleet:
+        array.flags.writeable = False
+    for round_ in range(2):
+        for array in fleet[:3]:
+            kept.get((array,), None, lambda: calls.append(1))
+    assert len(calls) == 3  # the second round found all three
+    kept.get((fleet[3],), None, lambda: calls.append(1))  # full: the oldest goes, not all
+    kept.get((fleet[2],), None, lambda: calls.append(1))
+    assert len(calls) == 4 and len(kept) == 3
+    del fleet[3]
+    assert len(kept) == 2  # its array died

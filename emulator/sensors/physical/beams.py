@@ -359,7 +359,7 @@ class _SurfaceGeometry:
         return geometry
 
 
-_STACKED = KeptPerArrays()
+_STACKED = KeptPerArrays(64)  # ≈ 0.6 MB per (sensor, count), and tiling again is cheap
 
 
 _GEOMETRIES = KeptPerArrays()
