@@ -1,6 +1,6 @@
 """`bench --section cola`: CoLa streams through the real daemon, every telegram timed on arrival.
 
-Two cases (docs/cola.md "Speed"):
+Two cases (docs/cola.md "Speed"), each followed by its floor:
 
 - `lms511-fine`: one LMS511 at 25 Hz, 0.1667° (1141 beams), under `physical`
   in a room with smoke, streamed over CoLa-B. Every scan must arrive (scan
@@ -10,25 +10,40 @@ Two cases (docs/cola.md "Speed"):
   0.5°), each streamed to its own client. Every telegram on time: counters
   consecutive, and its jitter (arrival minus transmission time, less the
   client's median of that) within 1 ms at the 99th percentile.
+- `floor`: the same telegram sizes, rates and phases from bare senders
+  (`cola_floor`: a timerfd-woken loop that does nothing else), read by the
+  same client: what this machine allows at the moment, to read the daemon's
+  figures against. The load average is printed with the figures.
 
-One thread reads every socket (selectors) and stamps each chunk as it
-arrives; only the telegram's header (counters, µs times) is read, at fixed
-CoLa-B offsets, so reading costs the clock nothing.
+One thread reads every socket (selectors). A telegram's arrival is the
+kernel's receive stamp of its last bytes (SO_TIMESTAMPNS, as `serve_load`
+takes it), and reads stop at a telegram's end, so the figures are the
+sender's, not this client's own scheduling; only the telegram's header
+(counters, µs times) is read, at fixed CoLa-B offsets.
 """
 
 from __future__ import annotations
 
+import os
 import selectors
 import socket
 import struct
+import subprocess
+import sys
 import tempfile
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Iterator
 
 import numpy as np
 
+from emulator.bench.serve_load import SCM_TIMESTAMPNS, SO_TIMESTAMPNS
 from emulator.bench.serve_process import ServeProcess
+from emulator.scene import load_scene
+from emulator.scene.sick_models import MODELS
+from emulator.sensors.sick_cola import configured_request, power_on_phase_ms
 from protocols.cola.framing import ColaReader, Dialect, frame
 
 ROOM = """
@@ -59,6 +74,8 @@ SENSOR = '[[sensors]]\nname = "{name}"\nmodel = "{model}"\nposition = [0.0, {y},
 HEADER = struct.Struct(">HHIBBHHII")  # version … transmission time, after "sSN LMDscandata "
 PAYLOAD_HEAD = len(b"sSN LMDscandata ")
 PERIOD_TOLERANCE = 0.05
+TIMESPEC = struct.Struct("@ll")
+LENGTH = struct.Struct(">I")  # a CoLa-B telegram's payload length, after its four STX
 JITTER_P99_LIMIT_MS = 1.0
 
 
@@ -68,18 +85,34 @@ class Stream:
 
     name: str
     period_s: float
+    sock: socket.socket
     reader: ColaReader = field(default_factory=ColaReader)
+    pending: int = 0  # bytes of the current telegram not read yet (0: its header is next)
     counters: list[int] = field(default_factory=list)
     sent_us: list[int] = field(default_factory=list)
     arrived_s: list[float] = field(default_factory=list)
 
-    def take(self, data: bytes, now: float) -> None:
+    def receive(self, realtime_to_monotonic: float, keep: bool) -> None:
+        """Read up to the end of the current telegram (its 8 header bytes first, then the rest)."""
+        wanted = self.pending or 8
+        data, ancillary, _, _ = self.sock.recvmsg(wanted, socket.CMSG_SPACE(TIMESPEC.size))
+        if not data:
+            raise RuntimeError(f"{self.name}: the sender closed the stream")
+        arrived = time.monotonic()
+        for level, kind, payload in ancillary:
+            if level == socket.SOL_SOCKET and kind == SCM_TIMESTAMPNS and len(payload) >= TIMESPEC.size:
+                seconds, nanoseconds = TIMESPEC.unpack_from(payload)
+                arrived = seconds + nanoseconds * 1e-9 - realtime_to_monotonic
+        if self.pending:
+            self.pending -= len(data)
+        elif len(data) == 8 and data.startswith(b"\x02\x02\x02\x02"):
+            self.pending = LENGTH.unpack_from(data, 4)[0] + 1  # the payload and its checksum
         for telegram in self.reader.feed(data):
-            if telegram.payload.startswith(b"sSN LMDscandata "):
+            if keep and telegram.payload.startswith(b"sSN LMDscandata "):
                 fields = HEADER.unpack_from(telegram.payload, PAYLOAD_HEAD)
                 self.counters.append(fields[6])
                 self.sent_us.append(fields[8])
-                self.arrived_s.append(now)
+                self.arrived_s.append(arrived)
 
     def summary(self) -> dict:
         counters = np.array(self.counters)
@@ -98,26 +131,28 @@ class Stream:
         }
 
 
-def _stream(daemon: ServeProcess, names: dict[str, float], duration_s: float, warm_up_s: float = 1.0) -> list[Stream]:
-    """Stream every named sensor to its own CoLa-B client for `duration_s` after `warm_up_s`."""
+Address = tuple[str, int]
+
+
+def _stream(sources: dict[str, tuple[Address, float]], duration_s: float, warm_up_s: float = 1.0) -> list[Stream]:
+    """Stream from every named source (address, period) to its own CoLa-B client for `duration_s` after `warm_up_s`."""
     selector = selectors.DefaultSelector()
     streams = []
-    for name, period_s in names.items():
-        sock = socket.create_connection(daemon.endpoint(name, "tcp").address, timeout=5)
+    for name, (address, period_s) in sources.items():
+        sock = socket.create_connection(address, timeout=5)
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
         sock.sendall(frame(b"sEN LMDscandata \x01", Dialect.BINARY))
         sock.setblocking(False)
-        stream = Stream(name, period_s)
+        stream = Stream(name, period_s, sock)
         streams.append(stream)
         selector.register(sock, selectors.EVENT_READ, stream)
     start = time.monotonic()
+    realtime_to_monotonic = time.time() - time.monotonic()  # the kernel stamps packets on CLOCK_REALTIME
     try:
         while time.monotonic() < start + warm_up_s + duration_s:
             for key, _ in selector.select(timeout=0.1):
-                now = time.monotonic()
-                data = key.fileobj.recv(1 << 20)
-                if data and now >= start + warm_up_s:
-                    key.data.take(data, now)
+                key.data.receive(realtime_to_monotonic, keep=time.monotonic() >= start + warm_up_s)
     finally:
         for key in list(selector.get_map().values()):
             key.fileobj.close()
@@ -125,28 +160,63 @@ def _stream(daemon: ServeProcess, names: dict[str, float], duration_s: float, wa
     return streams
 
 
-def _serve(folder: Path, sensors: list[tuple[str, str, str]], preset: str, workers: int) -> ServeProcess:
+def _scene(folder: Path, sensors: list[tuple[str, str, str]], preset: str) -> Path:
     text = "".join(SENSOR.format(name=name, model=model, y=0.3 * index, options=options)
                    for index, (name, model, options) in enumerate(sensors))
     scene = folder / f"cola-bench-{preset}.toml"
     scene.write_text(ROOM.format(sensors=text, preset=preset))
-    return ServeProcess(scene, [f"{name}=tcp:127.0.0.1:0" for name, _, _ in sensors], extra_args=("--workers", str(workers)))
+    return scene
+
+
+@contextmanager
+def _floor(scene_path: Path) -> Iterator[dict[str, Address]]:
+    """Bare senders (`cola_floor`) of the scene's CoLa sensors' telegram sizes, rates and power-on phases."""
+    scene = load_scene(scene_path)
+    specs = []
+    for spec in scene.sensors:
+        request = configured_request(spec.options)
+        beams = MODELS[spec.model].beam_count(request["resolution_ticks"])
+        specs.append(f"{spec.name}:{100_000 / request['frequency_ticks']!r}:{power_on_phase_ms(scene, spec.name)}:{beams}")
+    process = subprocess.Popen([sys.executable, "-m", "emulator.bench.cola_floor", *specs], stdout=subprocess.PIPE, text=True)
+    try:
+        addresses = {}
+        for _ in specs:
+            _, name, port = process.stdout.readline().split()  # type: ignore[union-attr]
+            addresses[name] = ("127.0.0.1", int(port))
+        yield addresses
+    finally:
+        process.terminate()
+        process.wait(10)
+
+
+def _rows(case: str, streams: list[Stream]) -> list[dict]:
+    load = os.getloadavg()[0]
+    return [{"case": case, **stream.summary(), "load": load} for stream in streams]
 
 
 def bench_section(quick: bool) -> tuple[dict, list[str]]:
     duration_s = 3.0 if quick else 10.0
     rows = []
     with tempfile.TemporaryDirectory(prefix="cola-bench-") as folder:
-        fine = [("lms511", "lms511", 'scan_frequency_hz = 25\nresolution_deg = 0.1667\n')]
-        with _serve(Path(folder), fine, "physical", workers=1) as daemon:
-            rows += [{"case": "lms511-fine", **s.summary()} for s in _stream(daemon, {"lms511": 0.04}, duration_s)]
+        fine = _scene(Path(folder), [("lms511", "lms511", 'scan_frequency_hz = 25\nresolution_deg = 0.1667\n')], "physical")
+        with ServeProcess(fine, ["lms511=tcp:127.0.0.1:0"], extra_args=("--workers", "1")) as daemon:
+            rows += _rows("lms511-fine", _stream({"lms511": (daemon.endpoint("lms511", "tcp").address, 0.04)}, duration_s))
+        with _floor(fine) as addresses:
+            rows += _rows("floor", _stream({"lms511": (addresses["lms511"], 0.04)}, duration_s))
         six = [(f"tim{i}", "tim571", "") for i in range(4)] + [(f"lms{i}", "lms111", "") for i in range(2)]
-        with _serve(Path(folder), six, "formsma2011", workers=0) as daemon:
-            periods = {name: (1 / 15 if model == "tim571" else 0.02) for name, model, _ in six}
-            rows += [{"case": "six-units", **s.summary()} for s in _stream(daemon, periods, duration_s)]
-    lines = ["cola: CoLa-B streams through the daemon (arrival-time jitter; gaps within 5 % of the period)",
-             f"  {'case':<12} {'client':<7} {'period':>7} {'scans':>6} {'missed':>6} {'gaps±5%':>8} {'p99 ms':>7} {'max ms':>7}"]
+        periods = {name: (1 / 15 if model == "tim571" else 0.02) for name, model, _ in six}
+        six_scene = _scene(Path(folder), six, "formsma2011")
+        with ServeProcess(six_scene, [f"{name}=tcp:127.0.0.1:0" for name, _, _ in six], extra_args=("--workers", "0")) as daemon:
+            rows += _rows("six-units", _stream({name: (daemon.endpoint(name, "tcp").address, period)
+                                                for name, period in periods.items()}, duration_s))
+        with _floor(six_scene) as addresses:
+            rows += _rows("floor", _stream({name: (addresses[name], period) for name, period in periods.items()}, duration_s))
+    lines = ["cola: CoLa-B streams through the daemon, and from bare timerfd senders (floor): arrival-time jitter,"
+             " gaps within 5 % of the period, load average",
+             f"  {'case':<12} {'client':<7} {'period':>7} {'scans':>6} {'missed':>6} {'gaps±5%':>8} {'p99 ms':>7} {'max ms':>7}"
+             f" {'load':>5}"]
     for row in rows:
         lines.append(f"  {row['case']:<12} {row['client']:<7} {row['period_ms']:>7.1f} {row['telegrams']:>6} {row['missed']:>6}"
-                     f" {row['gaps_within_5pct']:>8.1%} {row['jitter_p99_ms']:>7.2f} {row['jitter_max_ms']:>7.2f}")
+                     f" {row['gaps_within_5pct']:>8.1%} {row['jitter_p99_ms']:>7.2f} {row['jitter_max_ms']:>7.2f}"
+                     f" {row['load']:>5.2f}")
     return {"cola": rows}, lines

@@ -80,10 +80,12 @@ def test_bench_json_reports_every_bundled_sensor_and_every_section():
     assert all(row["rate"] > 0.5 and row["cpu_ms_per_scan"] > 0 for row in report["view"])
     assert all(row["loop_wakes"] > 0 and 0 <= row["loop_late_2ms"] <= 1 for row in report["view"])  # the daemon's counts
     assert report["view"][4]["mcap_bytes"] > 0
-    # CoLa streams: the fine LMS511, then the six units of one daemon, each with its figures
-    assert [(row["case"], row["client"]) for row in report["cola"]] == [("lms511-fine", "lms511")] + [
-        ("six-units", name) for name in ("tim0", "tim1", "tim2", "tim3", "lms0", "lms1")]
-    assert all(row["telegrams"] > 0 and row["jitter_p99_ms"] >= 0 for row in report["cola"])
+    # CoLa streams: the fine LMS511, then the six units of one daemon, each followed by its floor (bare senders)
+    six = ("tim0", "tim1", "tim2", "tim3", "lms0", "lms1")
+    assert [(row["case"], row["client"]) for row in report["cola"]] == [("lms511-fine", "lms511"), ("floor", "lms511")] + [
+        ("six-units", name) for name in six] + [("floor", name) for name in six]
+    assert all(row["telegrams"] > 0 and row["jitter_p99_ms"] >= 0 and row["load"] >= 0
+               for row in report["cola"])
     # SLAM in smoke: the URG-04LX and a UTM-30LX-EW's first and last echo through icp-slam
     assert [row["sensor"] for row in report["slam"]] == ["URG-04LX", "UTM-30LX-EW first echo", "UTM-30LX-EW last echo"]
     assert all(row["scans"] > 100 and 0 < row["ate_rmse_m"] <= row["ate_max_m"] for row in report["slam"])
