@@ -74,6 +74,7 @@ SENSOR = '[[sensors]]\nname = "{name}"\nmodel = "{model}"\nposition = [0.0, {y},
 HEADER = struct.Struct(">HHIBBHHII")  # version … transmission time, after "sSN LMDscandata "
 PAYLOAD_HEAD = len(b"sSN LMDscandata ")
 PERIOD_TOLERANCE = 0.05
+FIRST_TELEGRAM_TIMEOUT_S = 60.0
 TIMESPEC = struct.Struct("@ll")
 LENGTH = struct.Struct(">I")  # a CoLa-B telegram's payload length, after its four STX
 JITTER_P99_LIMIT_MS = 1.0
@@ -88,6 +89,7 @@ class Stream:
     sock: socket.socket
     reader: ColaReader = field(default_factory=ColaReader)
     pending: int = 0  # bytes of the current telegram not read yet (0: its header is next)
+    streaming: bool = False  # a LMDscandata telegram came
     counters: list[int] = field(default_factory=list)
     sent_us: list[int] = field(default_factory=list)
     arrived_s: list[float] = field(default_factory=list)
@@ -108,6 +110,7 @@ class Stream:
         elif len(data) == 8 and data.startswith(b"\x02\x02\x02\x02"):
             self.pending = LENGTH.unpack_from(data, 4)[0] + 1  # the payload and its checksum
         for telegram in self.reader.feed(data):
+            self.streaming |= telegram.payload.startswith(b"sSN LMDscandata ")
             if keep and telegram.payload.startswith(b"sSN LMDscandata "):
                 fields = HEADER.unpack_from(telegram.payload, PAYLOAD_HEAD)
                 self.counters.append(fields[6])
@@ -135,7 +138,8 @@ Address = tuple[str, int]
 
 
 def _stream(sources: dict[str, tuple[Address, float]], duration_s: float, warm_up_s: float = 1.0) -> list[Stream]:
-    """Stream from every named source (address, period) to its own CoLa-B client for `duration_s` after `warm_up_s`."""
+    """Stream from every named source (address, period) to its own CoLa-B client for `duration_s`, from
+    `warm_up_s` after every source has sent its first telegram."""
     selector = selectors.DefaultSelector()
     streams = []
     for name, (address, period_s) in sources.items():
@@ -147,12 +151,18 @@ def _stream(sources: dict[str, tuple[Address, float]], duration_s: float, warm_u
         stream = Stream(name, period_s, sock)
         streams.append(stream)
         selector.register(sock, selectors.EVENT_READ, stream)
-    start = time.monotonic()
     realtime_to_monotonic = time.time() - time.monotonic()  # the kernel stamps packets on CLOCK_REALTIME
+    give_up = time.monotonic() + FIRST_TELEGRAM_TIMEOUT_S
+    start = None  # once every stream has sent its first telegram (a worker's first scans may take seconds)
     try:
-        while time.monotonic() < start + warm_up_s + duration_s:
+        while start is None or time.monotonic() < start + warm_up_s + duration_s:
             for key, _ in selector.select(timeout=0.1):
-                key.data.receive(realtime_to_monotonic, keep=time.monotonic() >= start + warm_up_s)
+                key.data.receive(realtime_to_monotonic, keep=start is not None and time.monotonic() >= start + warm_up_s)
+            if start is None and all(stream.streaming for stream in streams):
+                start = time.monotonic()
+            elif start is None and time.monotonic() > give_up:
+                raise RuntimeError(f"no telegram from {[s.name for s in streams if not s.streaming]}"
+                                   f" in {FIRST_TELEGRAM_TIMEOUT_S:g} s")
     finally:
         for key in list(selector.get_map().values()):
             key.fileobj.close()
