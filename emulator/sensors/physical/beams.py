@@ -229,7 +229,7 @@ def beam_physics_at(instants: Instants, receiver: ReceiverOptics, params: Physic
         smoke_distance = np.where(np.isfinite(smoke_start), 0.5 * (smoke_start + smoke_end), 1.0)
     factor = fluctuation_factor(scene.seed, beams.sensor.name, beams.angles_rad, instants.times_s, column, smoke_distance, params)
     surfaces = _surfaces(instants, geometry, puff_to_end_and_surfaces[:, 1:], factor, extinction)
-    far_end = np.where(geometry.any_present, np.where(surfaces.present, surfaces.range_m, 0.0).max(axis=1), geometry.beam_end_m)
+    far_end = np.where(geometry.any_present, np.maximum.reduce(np.where(surfaces.present, surfaces.range_m, 0.0).T), geometry.beam_end_m)
     smoke = _smoke_echoes(instants, crossings, factor, smoke_start, np.minimum(smoke_end, far_end), extinction, receiver, params)
     return BeamPhysics(surfaces, smoke, factor * column)
 
@@ -404,9 +404,14 @@ def _footprint_surfaces(
         points = beams.origins[patchy[0]] + beams.directions[patchy[0]] * ranges[patchy][:, None]
         reflectivity[patchy] *= np.exp(patchiness[patchy] * patch_values(points, beams.scene.seed))
     limits = np.where(present, ranges, 0.0)
-    cos_factor = cosine**angle_exponent
+    cos_factor = cosine.copy()
+    steeper = np.nonzero(angle_exponent != 1.0)  # cos^1 is cos: the power only where a material differs (few)
+    cos_factor[steeper] **= angle_exponent[steeper]
     shares = used.sum(axis=1, keepdims=True)
     can_echo = present & echoing(reflectivity, cos_factor, ranges)
+    log_clear_air = np.full((n, sub_rays), -np.inf)
+    echoes = np.nonzero(can_echo)  # the logs only where a sub-ray can echo (most beams use one sub-ray)
+    log_clear_air[echoes] = log_clear_air_echo(reflectivity[echoes], cos_factor[echoes], ranges[echoes], receiver, params)
     edge_limits = np.minimum(ranges[edge_rows], hits.max_range_m)
     cast_is_central = np.ones(n)
     cast_is_central[edge_rows] = 0.0
@@ -416,9 +421,9 @@ def _footprint_surfaces(
         shares,
         edge_rows,
         present,
-        present.any(axis=1),
+        np.logical_or.reduce(present.T),  # over the few sub-rays, a whole column at a time
         np.concatenate([hits.beam_end_m[:, None], limits], axis=1),
-        np.where(can_echo, log_clear_air_echo(reflectivity, cos_factor, ranges, receiver, params), -np.inf),
+        log_clear_air,
         1.0 / shares,
         tuple(_chords_before(region, edge_rows, edge_limits) for region in hits.regions),
         cast_is_central,
