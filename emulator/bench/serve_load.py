@@ -21,6 +21,18 @@ message ends. Over the measuring window:
   received; "of it loop": the daemon's own process (protocols, transports,
   timers), without its workers.
 
+A SCIP scan's arrival is the kernel's receive stamp of its last packet
+(SO_TIMESTAMPNS; on loopback, taken within the daemon's send), so the
+figures are the daemon's timing, not this one client process's own
+scheduling (`read_late` counts the reads that came a period late, whose
+stamp may be the next message's).
+
+rescue's UTM-30LX-EW (`measure_utm_stream`) is served alone under `physical`
+and streams ME over TCP; `--epoch` starts simulated time so that the 40 s
+window holds the sensor's slowest instant (UTM_SLOWEST_AT_S, from
+`bench --section scans`), and each scan's gap to the previous is measured
+against the 25 ms period (target: every one within 5 %, 1.25 ms).
+
 Every figure is from one run (no best-of-N); the machine's load average is
 reported beside it, as the clients share the machine with the daemon.
 """
@@ -43,7 +55,7 @@ from typing import Callable
 import numpy as np
 
 from emulator.bench.serve_process import ServeProcess
-from emulator.scene import bundled_scenes
+from emulator.scene import bundled_scenes, load_scene
 from emulator.sensors.hokuyo_models import HOKUYO_MODELS
 from protocols.lms2xx import build_telegram
 from protocols.scip.encoding import decode_values
@@ -368,20 +380,100 @@ MOONSHOT = (100, 20, "formsma2011")  # URG-04LX, LMS200 at 500 kBd, preset: the 
 
 
 UST_ROW = (8, "ust-10lx")  # one daemon, eight UST-10LX at 40 Hz: every scan on time, jitter p99 <= 1 ms
+UST_PRESETS = ("formsma2011", "physical")
+
+# rescue's UTM-30LX-EW streaming ME under `physical`: every scan's gap to the previous within 5 % of its
+# 25 ms period, over a window holding the sensor's slowest instant (`bench --section scans`: rescue, utm,
+# physical, "at s"; docs/performance.md has the run).
+UTM_SCENE, UTM_SENSOR, UTM_PRESET = "rescue", "utm", "physical"
+UTM_SLOWEST_AT_S = 59.0
+UTM_WINDOW_S = 40.0
+UTM_TOLERANCE = 0.05
+UTM_START_UP_S = 15.0  # allowance for the daemon's start (its workers build rescue's world) before the warm-up
+
+
+def me_unlimited(hokuyo: str) -> bytes:
+    """An unlimited ME stream (range + intensity) of the model's measured steps AMIN..AMAX."""
+    return b"ME" + md_unlimited(hokuyo)[2:]
+
+
+def measure_utm_stream(
+    duration_s: float = UTM_WINDOW_S, slowest_at_s: float = UTM_SLOWEST_AT_S, model: str = UTM_PRESET
+) -> dict:
+    """Serve rescue's UTM-30LX-EW alone under `model` with simulated time started (`--epoch`) so that the
+    measuring window of `duration_s` is centred on `slowest_at_s`; stream ME over TCP and measure each
+    scan's gap to the previous against the 25 ms period (kernel receive stamps, as the fleet rows)."""
+    scene_path = Path(next(bundled for bundled in bundled_scenes() if bundled.name == UTM_SCENE).path)
+    hokuyo = next(spec.model for spec in load_scene(scene_path).sensors if spec.name == UTM_SENSOR)
+    period_s = HOKUYO_MODELS[hokuyo].period_s
+    window_from_s = max(0.0, slowest_at_s - duration_s / 2)
+    epoch = time.time() - max(0.0, window_from_s - WARM_UP_S - UTM_START_UP_S)
+    extra = ["--model", model, "--sensors", UTM_SENSOR, "--epoch", f"{epoch:.6f}"]
+    with ServeProcess(scene_path, [f"{UTM_SENSOR}=tcp:127.0.0.1:0"], extra_args=extra, timeout_s=300.0) as daemon:
+        sock = socket.create_connection(daemon.endpoint(UTM_SENSOR).address, timeout=5)
+        stream = _Stream(sock)
+        sock.sendall(me_unlimited(hokuyo))
+        sock.setblocking(False)
+        selector = selectors.DefaultSelector()
+        selector.register(sock, selectors.EVENT_READ, stream)
+        realtime_to_monotonic = time.time() - time.monotonic()
+        measure_from = time.monotonic() + max(WARM_UP_S, window_from_s - (time.time() - epoch))
+        try:
+            while (now := time.monotonic()) < measure_from + duration_s:
+                if stream.arrivals and stream.arrivals[0] < measure_from <= now:
+                    stream.forget()  # the window starts here: forget the warm-up
+                for _ in selector.select(timeout=0.05):
+                    stream.receive(realtime_to_monotonic)
+        finally:
+            selector.close()
+            sock.close()
+        load = os.getloadavg()
+    arrivals = [arrival for arrival in stream.arrivals if arrival >= measure_from]
+    gaps = np.diff(arrivals) if len(arrivals) > 1 else np.array([np.nan])
+    deviation = np.abs(gaps - period_s) / period_s
+    window_sim = (measure_from + realtime_to_monotonic - epoch, measure_from + duration_s + realtime_to_monotonic - epoch)
+    return {
+        "scene": UTM_SCENE,
+        "hokuyo": hokuyo,
+        "model": model,
+        "duration_s": duration_s,
+        "window_sim_s": [round(window_sim[0], 1), round(window_sim[1], 1)],
+        "slowest_at_s": slowest_at_s,
+        "scans_received": len(arrivals),
+        "rate": len(arrivals) / (duration_s / period_s),
+        "within_5pct": float(np.mean(deviation <= UTM_TOLERANCE)),
+        "gap_deviation_p50_ms": float(np.percentile(deviation, 50)) * period_s * 1000.0,
+        "gap_deviation_p99_ms": float(np.percentile(deviation, 99)) * period_s * 1000.0,
+        "gap_deviation_max_ms": float(np.max(deviation)) * period_s * 1000.0,
+        "read_late": stream.read_late,
+        "load_average": [round(value, 2) for value in load],
+    }
+
+
+def utm_lines(row: dict) -> list[str]:
+    return [
+        f"serve: {row['scene']}'s {row['hokuyo']} alone under {row['model']}, ME over TCP, {row['duration_s']:g} s over simulated"
+        f" {row['window_sim_s'][0]:g}..{row['window_sim_s'][1]:g} s (its slowest instant: {row['slowest_at_s']:g} s):"
+        f" rate {row['rate']:.1%}, gaps within {UTM_TOLERANCE:.0%} of the period {row['within_5pct']:.2%},"
+        f" deviation p50 {row['gap_deviation_p50_ms']:.2f} / p99 {row['gap_deviation_p99_ms']:.2f} / max {row['gap_deviation_max_ms']:.2f} ms"
+        f"  load {' '.join(f'{value:g}' for value in row['load_average'])}"
+    ]
 
 
 def bench_section(quick: bool) -> tuple[dict, list[str]]:
     """`lrf-emulator bench --section serve`: N = 1, 10, 40 URGs under `physical`, 8 UST-10LX (40 Hz) under
-    `physical`, then the moonshot (100 URGs + 20 LMS200 under `formsma2011`; not in a quick run: its
-    start-up alone takes ~10 s), then the capacity curve (`capacity.py`). Quick: 5 s each, else 30 s."""
+    `formsma2011` and under `physical`, then the moonshot (100 URGs + 20 LMS200 under `formsma2011`; not in
+    a quick run: its start-up alone takes ~10 s), rescue's UTM-30LX-EW streaming ME under `physical` over
+    its slowest instant (40 s; quick: 10 s), then the capacity curve (`capacity.py`). Quick: 5 s each, else 30 s."""
     duration = 5.0 if quick else 30.0
     rows = [measure_serve(count, duration) for count in (1, 10, 40)]
     count, hokuyo = UST_ROW
-    rows.append(measure_serve(count, duration, hokuyo=hokuyo))
+    rows += [measure_serve(count, duration, model=preset, hokuyo=hokuyo) for preset in UST_PRESETS]
     if not quick:
         urgs, lms, model = MOONSHOT
         rows.append(measure_serve(urgs, duration, model=model, lms_count=lms))
     from emulator.bench.capacity import bench_curves  # the fleet past what its worker computes
 
+    utm = measure_utm_stream(duration_s=10.0 if quick else UTM_WINDOW_S)
     curves, curve_lines = bench_curves(quick)
-    return {"serve": rows, **curves}, [*table_lines(rows), *curve_lines]
+    return {"serve": rows, "utm_stream": utm, **curves}, [*table_lines(rows), *utm_lines(utm), *curve_lines]

@@ -85,3 +85,14 @@ def test_a_scip_stream_is_timed_when_the_daemon_sent_each_message_not_when_the_c
     for arrival, sent_at in zip(stream.arrivals[1:], sent):
         assert sent_at - 0.001 <= arrival <= sent_at + 0.01  # not 60 ms later, when it was read
     assert stream.read_late == 0
+
+
+def test_rescues_utm_streams_me_and_each_gap_is_measured_against_its_25_ms_period() -> None:
+    from emulator.bench.serve_load import measure_utm_stream
+
+    row = measure_utm_stream(duration_s=1.5, slowest_at_s=0.0, model="formsma2011")
+    assert row["hokuyo"] == "utm-30lx-ew"
+    assert 45 <= row["scans_received"] <= 75  # 40/s × 1.5 s
+    assert row["window_sim_s"][0] >= 0 and abs(row["window_sim_s"][1] - row["window_sim_s"][0] - 1.5) < 0.11
+    assert 0 <= row["gap_deviation_p50_ms"] <= row["gap_deviation_p99_ms"] <= row["gap_deviation_max_ms"]
+    assert 0 <= row["within_5pct"] <= 1
