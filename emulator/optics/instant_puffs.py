@@ -69,7 +69,13 @@ def cross_instants(
         rows = slice(group[0] * n, (group[0] + 1) * n)
         offsets = np.array(group).repeat([len(parts[k]) for k in group]) * n
         pieces.append(cross_beams(Puffs.concatenate([parts[k] for k in group]), origins[rows], directions[rows], beam_end_m[rows], offsets))
-    return BeamPuffCrossings(*(np.concatenate([getattr(piece, name) for piece in pieces]) for name in _FIELDS))
+    rows = max((len(piece.pooled_column) for piece in pieces), default=0)
+    pooled = np.zeros(rows)
+    reach = np.zeros(rows)
+    for piece in pieces:  # each row's pooled pairs come from one piece (its instant's)
+        pooled[: len(piece.pooled_column)] += piece.pooled_column
+        np.maximum(reach[: len(piece.pooled_reach_m)], piece.pooled_reach_m, out=reach[: len(piece.pooled_reach_m)])
+    return BeamPuffCrossings(*(np.concatenate([getattr(piece, name) for piece in pieces]) for name in _FIELDS), pooled, reach)
 
 
 _FIELDS = ("beam", "along_m", "sigma", "column", "before_origin", "near")

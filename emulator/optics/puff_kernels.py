@@ -17,7 +17,8 @@ import numpy as np
 from numba import njit
 
 SATURATED = 8.3  # |z| beyond this: Phi is 0 or 1 to within 1e-16
-GRID_WINDOW = 6.0  # range bins: beyond this Phi is taken as 0 or 1 (1e-9 of a column)
+WINDOW = 6.0  # range bins and pooled pairs: beyond this Phi is taken as 0 or 1
+WINDOW_ERROR = 1e-9  # Phi(-WINDOW) = 9.9e-10: what that costs, per pair, in units of its column
 _STEPS_PER_SIGMA = 64
 _NODES = np.arange(-SATURATED, SATURATED + 2.0 / _STEPS_PER_SIGMA, 1.0 / _STEPS_PER_SIGMA)
 # per node: Phi and its slope phi times the step, side by side (17 KB: stays in the first-level cache)
@@ -51,14 +52,18 @@ def _cdf(z: float) -> float:
 @njit(cache=True, error_model="numpy")
 def fan_crossings(
     offsets: np.ndarray, sigma: np.ndarray, central_column: np.ndarray, reach_sigmas: np.ndarray, row_offset: np.ndarray,
-    axes: np.ndarray, beam_angle: np.ndarray, directions: np.ndarray, beam_end: np.ndarray, near_sigmas: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    axes: np.ndarray, beam_angle: np.ndarray, directions: np.ndarray, beam_end: np.ndarray, near_sigmas: float, rows: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The (beam, puff) pairs of a fan of beams from one origin: puff p's centre lies at `offsets[p]`
     from the origin; it pairs with every beam that passes within `reach_sigmas[p]` × sigma of its
     centre before the beam's end + that reach (and not wholly behind the origin). `axes` rows: the
     fan's normal, first and second in-plane axes; `beam_angle` ascending. Pairs come puff by puff,
     beams ascending; a pair's row is its beam + `row_offset[p]`. Returns row, along, sigma, column,
-    Phi(−along/sigma) and whether the pair lies within `near_sigmas` (the old, shorter reach)."""
+    Phi(−along/sigma) and whether the pair lies within `near_sigmas` (the old, shorter reach); then per
+    row (`rows` of them) the pooled columns of its faint pairs (beyond `near_sigmas`) whose Gaussian
+    (±WINDOW sigma) lies between the origin and the beam's end, and where the farthest of those
+    ends: such a pair adds its column (within WINDOW_ERROR of it) to any path reaching past that, so it is summed
+    here instead of kept (most pairs of a dense plume are such)."""
     count = len(sigma)
     n = len(beam_angle)
     low = np.zeros((count, 3), dtype=np.int64)
@@ -93,6 +98,8 @@ def fan_crossings(
     column_of = np.empty(total)
     before_of = np.empty(total)
     near_of = np.empty(total, dtype=np.bool_)
+    pooled_column = np.zeros(rows)
+    pooled_reach = np.zeros(rows)
     kept = 0
     for p in range(count):
         s = sigma[p]
@@ -111,23 +118,32 @@ def fan_crossings(
                 miss_sq = max(distance_sq - along * along, 0.0)
                 if miss_sq >= reach_sq or not (along > 0.0 or distance_sq < reach_sq):
                     continue
-                row[kept] = b + row_offset[p]
+                is_near = miss_sq < near_sq and along < beam_end[b] + near and (along > 0.0 or distance_sq < near_sq)
+                column = central_column[p] * math.exp(-miss_sq * inverse_two_var)
+                r = b + row_offset[p]
+                if not is_near and along >= WINDOW * s and along + WINDOW * s <= beam_end[b]:
+                    pooled_column[r] += column
+                    pooled_reach[r] = max(pooled_reach[r], along + WINDOW * s)
+                    continue
+                row[kept] = r
                 along_of[kept] = along
                 sigma_of[kept] = s
-                column_of[kept] = central_column[p] * math.exp(-miss_sq * inverse_two_var)
+                column_of[kept] = column
                 before_of[kept] = _cdf(-along / s) if along < SATURATED * s else 0.0
-                near_of[kept] = miss_sq < near_sq and along < beam_end[b] + near and (along > 0.0 or distance_sq < near_sq)
+                near_of[kept] = is_near
                 kept += 1
-    return row[:kept], along_of[:kept], sigma_of[:kept], column_of[:kept], before_of[:kept], near_of[:kept]
+    return row[:kept], along_of[:kept], sigma_of[:kept], column_of[:kept], before_of[:kept], near_of[:kept], pooled_column, pooled_reach
 
 
 @njit(cache=True, error_model="numpy")
 def path_to(
     limits: np.ndarray, position: np.ndarray, row: np.ndarray, along: np.ndarray, sigma: np.ndarray, column: np.ndarray,
-    before: np.ndarray,
+    before: np.ndarray, pooled_column: np.ndarray, pooled_reach: np.ndarray,
 ) -> np.ndarray:
     """Optical path from each beam's origin to its `limits` (R, M) (inf or NaN: the whole way), for the
-    rows whose `position[row]` ≥ 0 (their line in `limits`); a limit of 0 gives exactly 0."""
+    rows whose `position[row]` ≥ 0 (their line in `limits`); a limit of 0 gives exactly 0. A row's
+    pooled column (see fan_crossings) counts for its limits past its pooled reach. A later limit equal
+    to the row's first is not summed again but copied (the same terms in the same order)."""
     count, width = limits.shape
     result = np.zeros((count, width))
     for q in range(len(row)):
@@ -137,13 +153,25 @@ def path_to(
         a, s, c, b = along[q], sigma[q], column[q], before[q]
         for m in range(width):
             limit = limits[r, m]
-            if limit == 0.0:
+            if limit == 0.0 or (m > 0 and limit == limits[r, 0]):
                 continue
             z = (limit - a) / s if limit < 1e12 else SATURATED + 1.0  # inf and NaN: past every puff
             if z >= SATURATED:
                 result[r, m] += c * (1.0 - b)
             elif z > -SATURATED:
                 result[r, m] += c * (_cdf(z) - b)
+    for i in range(min(len(position), len(pooled_column))):
+        r = position[i]
+        if r < 0 or pooled_column[i] == 0.0:
+            continue
+        for m in range(width):
+            limit = limits[r, m]
+            if limit != 0.0 and not limit < pooled_reach[i]:  # NaN: the whole way
+                result[r, m] += pooled_column[i]
+    for r in range(count):
+        for m in range(1, width):
+            if limits[r, m] == limits[r, 0]:
+                result[r, m] = result[r, 0]
     return result
 
 
@@ -168,10 +196,10 @@ def path_on_grid(
         step = length[r] * inverse
         for k in range(width):
             z = first + step * fractions[k]
-            if z >= GRID_WINDOW:
+            if z >= WINDOW:
                 past[r, k] += c * (1.0 - b)
                 break
-            if z > -GRID_WINDOW:
+            if z > -WINDOW:
                 inside[r, k] += c * (_cdf(z) - b)
     for r in range(count):
         carried = 0.0

@@ -23,7 +23,7 @@ within that. See docs/physical-model.md, "Plumes at scale".
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -92,6 +92,11 @@ class BeamPuffCrossings:
     origin (Phi(-along/sigma)), which the beam never sees; `near`: the pair
     lies within REACH_SIGMAS (it sets where the beam's smoke starts and ends;
     the others only add their faint tails to the paths).
+
+    Per beam index, `pooled_column` sums the faint pairs not kept (wholly
+    between the origin and the beam's end: their whole column counts for any
+    limit from `pooled_reach_m` on; a nearer limit, as a footprint's nearer
+    surface may be, leaves them out, each under 1.2 % of its puff's column).
     """
 
     beam: np.ndarray
@@ -100,6 +105,8 @@ class BeamPuffCrossings:
     column: np.ndarray
     before_origin: np.ndarray
     near: np.ndarray
+    pooled_column: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    pooled_reach_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def __len__(self) -> int:
         return len(self.beam)
@@ -113,11 +120,13 @@ class BeamPuffCrossings:
         their order, whatever the other beams or limits.
         """
         limits = np.asarray(limits_m, dtype=float)
-        if limits.size == 0 or len(self) == 0:
+        if limits.size == 0 or (len(self) == 0 and not self.pooled_column.any()):
             return np.zeros(limits.shape)
         per_beam = np.ascontiguousarray(limits.reshape(len(limits), -1))
         position = self._positions(len(per_beam) if rows is None else None, rows)
-        path = puff_kernels.path_to(per_beam, position, self.beam, self.along_m, self.sigma, self.column, self.before_origin)
+        path = puff_kernels.path_to(
+            per_beam, position, self.beam, self.along_m, self.sigma, self.column, self.before_origin, self.pooled_column, self.pooled_reach_m
+        )
         return path.reshape(limits.shape)
 
     def optical_path_on_grid(self, rows: np.ndarray, start_m: np.ndarray, length_m: np.ndarray, fractions: np.ndarray) -> np.ndarray:
@@ -138,7 +147,7 @@ class BeamPuffCrossings:
 
     def _positions(self, count: int | None, rows: np.ndarray | None) -> np.ndarray:
         """Per beam index, its line in the caller's arrays (−1: not asked for)."""
-        size = max(int(self.beam.max()) + 1, count or 0, int(rows.max()) + 1 if rows is not None and len(rows) else 0)
+        size = max(int(self.beam.max(initial=-1)) + 1, count or 0, int(rows.max()) + 1 if rows is not None and len(rows) else 0)
         if rows is None:
             position = np.full(size, -1, dtype=np.int64)
             position[:count] = np.arange(count)
@@ -176,9 +185,10 @@ def cross_beams(
         live = (~far).nonzero()[0]
         offsets = puffs.centers.take(live, axis=0) - origins[0]
         offset_of_row = np.zeros(len(live), dtype=np.int64) if row_offset is None else row_offset.take(live).astype(np.int64)
+        rows = len(origins) + (int(row_offset.max()) if row_offset is not None else 0)
         return BeamPuffCrossings(*puff_kernels.fan_crossings(
             offsets, puffs.sigma.take(live), puffs.central_column.take(live), reach.take(live), offset_of_row,
-            fan.axes_by_row[:, :, 0].T.copy(), fan.beam_angle, directions, beam_end_m, REACH_SIGMAS,
+            fan.axes_by_row[:, :, 0].T.copy(), fan.beam_angle, directions, beam_end_m, REACH_SIGMAS, rows,
         ))
     far = segments.far_from(puffs.centers, reach_of_puff)
     if far.all():

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from emulator.optics.puff_kernels import CDF_ERROR, normal_cdf
+from emulator.optics.puff_kernels import CDF_ERROR, WINDOW_ERROR, normal_cdf
 from emulator.optics.puffs import TRUNCATION_BUDGET, BeamPuffCrossings, Puffs, cross_beams
 from emulator.scene.material_optics import BUILTIN_OPTICS, patch_values
 from emulator.scene.materials import BUILTIN_MATERIALS
@@ -77,7 +77,7 @@ def test_puff_optical_path_equals_numerical_integration_of_the_gaussian(centre, 
 @settings(max_examples=30, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), growth=st.floats(1.0, 1.6), bins=st.integers(1, 24))
 def test_puff_path_on_a_grid_equals_the_path_to_each_grid_point(seed, growth, bins):
-    """The range bins' shortcut (the near pairs only, CDF only within GRID_WINDOW sigmas of each puff)
+    """The range bins' shortcut (the near pairs only, CDF only within WINDOW sigmas of each puff)
     against `optical_path_to` at the same distances, on beams that start inside, before and past puffs."""
     rng = np.random.default_rng(seed)
     count = 200
@@ -101,10 +101,11 @@ def test_puff_path_on_a_grid_equals_the_path_to_each_grid_point(seed, growth, bi
     assert np.count_nonzero(expected) > 10
     on_grid = crossings.optical_path_on_grid(rows, start, length, fractions)
     column_per_row = np.bincount(crossings.beam[near], weights=crossings.column[near], minlength=len(angles))[rows]
-    # the CDF taken as 0 or 1 beyond GRID_WINDOW sigmas: at most 1e-9 of each column, besides the table's own error
-    assert np.all(np.abs(on_grid - expected) < (1e-9 + 2 * CDF_ERROR) * column_per_row[:, None] + 1e-15)
+    # the CDF taken as 0 or 1 beyond WINDOW sigmas: at most WINDOW_ERROR of each column, besides the table's own error
+    assert np.all(np.abs(on_grid - expected) < (WINDOW_ERROR + 2 * CDF_ERROR) * column_per_row[:, None] + 1e-15)
     # the faint tails beyond REACH_SIGMAS are in every path but not in the bins: they add at most their columns
     tails = np.bincount(crossings.beam[~near], weights=crossings.column[~near], minlength=len(angles))[rows]
+    tails += crossings.pooled_column[rows]
     assert np.all(crossings.optical_path_to(grid, rows) - on_grid <= tails[:, None] + 1e-12)
 
 

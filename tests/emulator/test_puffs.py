@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from emulator.optics.puff_kernels import WINDOW, WINDOW_ERROR
 from emulator.optics.puffs import REACH_SIGMAS, BeamPuffCrossings, Puffs, cross_beams
 from emulator.scene.plumes import Particles
 
@@ -48,12 +49,23 @@ def _fan_and_brute(puffs: Puffs, end: np.ndarray) -> tuple[BeamPuffCrossings, Be
 def test_a_full_circle_fan_finds_the_same_pairs_as_brute_force(puffs):
     end = np.random.default_rng(5).uniform(0.5, 5.0, 720)  # ends short of many puffs
     fan, brute = _fan_and_brute(puffs, end)
+    # the fan pools its faint pairs that lie wholly between the origin and the beam's end; brute force keeps them all
+    window = WINDOW * brute.sigma
+    pooled = ~brute.near & (brute.along_m >= window) & (brute.along_m + window <= end[brute.beam])
+    assert pooled.sum() > 100
+    kept = BeamPuffCrossings(*(getattr(brute, name)[~pooled] for name in ("beam", "along_m", "sigma", "column", "before_origin", "near")))
     fan_beam, fan_fields = _sorted(fan)
-    brute_beam, brute_fields = _sorted(brute)
+    brute_beam, brute_fields = _sorted(kept)
     assert len(fan) > 2000
     assert len(np.unique(fan.beam)) > 600  # beams on every side, across the wrap at ±pi
     np.testing.assert_array_equal(fan_beam, brute_beam)
     np.testing.assert_allclose(fan_fields, brute_fields, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(fan.pooled_column, np.bincount(brute.beam[pooled], weights=brute.column[pooled], minlength=720), rtol=1e-9)
+    reach = np.zeros(720)
+    np.maximum.at(reach, brute.beam[pooled], (brute.along_m + window)[pooled])
+    np.testing.assert_allclose(fan.pooled_reach_m, reach, rtol=1e-12)
+    columns = np.bincount(brute.beam, weights=brute.column, minlength=720)
+    assert np.all(np.abs(fan.optical_path_to(end) - brute.optical_path_to(end)) <= 2 * WINDOW_ERROR * columns + 1e-15)
 
 
 def test_puffs_far_from_every_beam_cross_nothing():
