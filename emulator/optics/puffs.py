@@ -24,10 +24,10 @@ within that. See docs/physical-model.md, "Plumes at scale".
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from types import ModuleType
 
 import numpy as np
 
-from emulator.optics import puff_kernels
 from emulator.optics.fans import beam_segments, dot_rows
 from emulator.scene.plumes import Particles
 
@@ -124,7 +124,7 @@ class BeamPuffCrossings:
             return np.zeros(limits.shape)
         per_beam = np.ascontiguousarray(limits.reshape(len(limits), -1))
         position = self._positions(len(per_beam) if rows is None else None, rows)
-        path = puff_kernels.path_to(
+        path = _kernels().path_to(
             per_beam, position, self.beam, self.along_m, self.sigma, self.column, self.before_origin, self.pooled_column, self.pooled_reach_m
         )
         return path.reshape(limits.shape)
@@ -136,14 +136,14 @@ class BeamPuffCrossings:
         if len(rows) == 0 or len(self) == 0:
             return np.zeros((len(rows), len(fractions)))
         position = self._positions(None, rows)
-        return puff_kernels.path_on_grid(
+        return _kernels().path_on_grid(
             np.ascontiguousarray(start_m, dtype=float), np.ascontiguousarray(length_m, dtype=float), np.ascontiguousarray(fractions, dtype=float),
             position, self.beam, self.along_m, self.sigma, self.column, self.before_origin, self.near,
         )
 
     def extent_m(self, n_beams: int) -> tuple[np.ndarray, np.ndarray]:
         """Per beam, where puff smoke starts and ends (REACH_SIGMAS around the near pairs' centres; inf/−inf if none)."""
-        return puff_kernels.extent(n_beams, self.beam, self.along_m, self.sigma, self.near, REACH_SIGMAS)
+        return _kernels().extent(n_beams, self.beam, self.along_m, self.sigma, self.near, REACH_SIGMAS)
 
     def _positions(self, count: int | None, rows: np.ndarray | None) -> np.ndarray:
         """Per beam index, its line in the caller's arrays (−1: not asked for)."""
@@ -186,7 +186,7 @@ def cross_beams(
         offsets = puffs.centers.take(live, axis=0) - origins[0]
         offset_of_row = np.zeros(len(live), dtype=np.int64) if row_offset is None else row_offset.take(live).astype(np.int64)
         rows = len(origins) + (int(row_offset.max()) if row_offset is not None else 0)
-        return BeamPuffCrossings(*puff_kernels.fan_crossings(
+        return BeamPuffCrossings(*_kernels().fan_crossings(
             offsets, puffs.sigma.take(live), puffs.central_column.take(live), reach.take(live), offset_of_row,
             fan.axes_by_row[:, :, 0].T.copy(), fan.beam_angle, directions, beam_end_m, REACH_SIGMAS, rows,
         ))
@@ -238,10 +238,17 @@ def crossings_of_candidates(
     near = (miss_sq < near_sq) & (along < beam_end_m.take(beam) + near_reach) & ((along > 0) | (distance_sq < near_sq))
     if row_offset is not None:
         beam = beam + row_offset.take(puff)
-    return BeamPuffCrossings(beam, along, sigma, column, puff_kernels.normal_cdf(-along / sigma), near)
+    return BeamPuffCrossings(beam, along, sigma, column, _kernels().normal_cdf(-along / sigma), near)
 
 
 _SQRT_2PI = np.sqrt(2.0 * np.pi)
+
+
+def _kernels() -> ModuleType:
+    """The compiled loops, imported with the first crossing: numba loads only where puffs are crossed."""
+    from emulator.optics import puff_kernels
+
+    return puff_kernels
 
 
 def _no_crossings() -> BeamPuffCrossings:
