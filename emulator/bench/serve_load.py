@@ -40,6 +40,7 @@ reported beside it, as the clients share the machine with the daemon.
 from __future__ import annotations
 
 import fcntl
+import math
 import os
 import selectors
 import socket
@@ -73,6 +74,7 @@ SO_TIMESTAMPNS = 35
 SCM_TIMESTAMPNS = SO_TIMESTAMPNS
 _TIMESPEC = struct.Struct("@ll")
 WARM_UP_S = 3.0
+FIRST_SCAN_TIMEOUT_S = 120.0
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 
 
@@ -276,12 +278,16 @@ def _stream_all(
     for stream in everyone:
         stream.sock.setblocking(False)
         selector.register(stream.sock, selectors.EVENT_READ, stream)
-    started = time.monotonic()
-    realtime_to_monotonic = time.time() - started  # the kernel stamps packets on CLOCK_REALTIME
-    measure_from, measure_to = started + WARM_UP_S, started + WARM_UP_S + duration_s
+    realtime_to_monotonic = time.time() - time.monotonic()  # the kernel stamps packets on CLOCK_REALTIME
+    measure_from = measure_to = math.inf  # WARM_UP_S after every stream's first scan (a worker's first may take seconds)
+    give_up = time.monotonic() + FIRST_SCAN_TIMEOUT_S
     cpu_before = loop_before = None
     try:
         while (now := time.monotonic()) < measure_to:
+            if measure_from == math.inf and all(stream.arrivals for stream in everyone):
+                measure_from, measure_to = now + WARM_UP_S, now + WARM_UP_S + duration_s
+            elif measure_from == math.inf and now > give_up:
+                raise RuntimeError(f"a stream sent no scan within {FIRST_SCAN_TIMEOUT_S:g} s")
             if cpu_before is None and now >= measure_from:
                 cpu_before, loop_before = cpu_seconds(daemon.pid), cpu_seconds(daemon.pid, children=False)
                 if on_window is not None:
@@ -417,9 +423,14 @@ def measure_utm_stream(
         selector = selectors.DefaultSelector()
         selector.register(sock, selectors.EVENT_READ, stream)
         realtime_to_monotonic = time.time() - time.monotonic()
-        measure_from = time.monotonic() + max(WARM_UP_S, window_from_s - (time.time() - epoch))
+        measure_from = math.inf  # WARM_UP_S after its first scan, and not before the window's simulated start
+        give_up = time.monotonic() + FIRST_SCAN_TIMEOUT_S
         try:
             while (now := time.monotonic()) < measure_from + duration_s:
+                if measure_from == math.inf and stream.arrivals:
+                    measure_from = now + max(WARM_UP_S, window_from_s - (time.time() - epoch))
+                elif measure_from == math.inf and now > give_up:
+                    raise RuntimeError(f"{UTM_SENSOR} sent no scan within {FIRST_SCAN_TIMEOUT_S:g} s")
                 if stream.arrivals and stream.arrivals[0] < measure_from <= now:
                     stream.forget()  # the window starts here: forget the warm-up
                 for _ in selector.select(timeout=0.05):
