@@ -333,7 +333,10 @@ def test_kept_values_outlast_a_fleet_round_and_go_with_their_arrays():
     goes as soon as its arrays die."""
     from emulator.optics.kept import KEPT_VALUES, KeptPerArrays
 
+    from emulator.sensors.physical.noise import _fluctuation_modes
+
     assert KEPT_VALUES >= 3 * 256  # a few values for every sensor of the largest scene
+    assert _fluctuation_modes.cache_info().maxsize >= 256  # its arrays key a store: one per sensor
     kept, calls = KeptPerArrays(size=3), []
     fleet = [np.full(4, float(index)) for index in range(4)]
     for array in fleet:

@@ -12,7 +12,7 @@ from typing import Sequence
 
 import numpy as np
 
-from emulator.optics.kept import KeptPerArrays
+from emulator.optics.kept import KEPT_VALUES, KeptPerArrays
 from emulator.scene.plumes import splitmix64
 from emulator.sensors.physical.params import (
     LMS_SIGMA_M,
@@ -59,7 +59,7 @@ def _angle_modes(angles_rad: np.ndarray, wavenumber: np.ndarray) -> np.ndarray:
     return _read_only(np.sqrt(2.0 / len(wavenumber)) * np.concatenate([np.cos(argument), -np.sin(argument)], axis=1))
 
 
-@functools.lru_cache(maxsize=64)
+@functools.lru_cache(maxsize=KEPT_VALUES)  # one per sensor of a fleet: its wavenumbers key `_FIELD_ANGLES`
 def _fluctuation_modes(seed: int, sensor: str, modes: int, angle_deg: float, time_s: float) -> tuple[np.ndarray, ...]:
     """The field's random wavenumbers, frequencies and phases: fixed per seed and sensor, so drawn once."""
     rng = np.random.default_rng(_sensor_key(seed, sensor) + [_FLUCTUATION_STREAM])
