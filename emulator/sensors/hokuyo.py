@@ -24,7 +24,7 @@ from emulator.scene.model import Scene, SensorSpec
 from emulator.sensors import formsma2011
 from emulator.sensors.hokuyo_models import URG_04LX, HokuyoModel
 from emulator.sensors.mount import SensorMount, cast_moving
-from emulator.sensors.physical.multi_echo import echo_lists_at, intensity_of
+from emulator.sensors.physical.multi_echo import echo_lists_at, intensity_of, nearest_first
 from emulator.sensors.physical.params import DEFAULT_PARAMS, PULSED_RECEIVERS
 from emulator.sensors.response import Beams, response_model, values_at_instants
 from emulator.sensors.scan import Scan, simulated_instant
@@ -108,7 +108,7 @@ class HokuyoSensor:
             millimetres = np.rint(np.nan_to_num(lists.ranges_m, nan=-1.0) * 1000.0).astype(np.int64)
             seen = np.isfinite(lists.ranges_m) & (millimetres >= model.min_value_mm) & (millimetres <= model.max_value_mm)
             too_near = (np.isfinite(lists.ranges_m) & (millimetres < model.min_value_mm)).any(axis=-1)
-            echoes, strengths = _nearest_first(seen, millimetres, lists.intensities(receiver))
+            echoes, strengths = nearest_first(seen, millimetres, lists.intensities(receiver))
             code = np.where(too_near, model.non_measurable, model.no_echo)
             first = np.where(echoes[..., 0] >= 0, echoes[..., 0], code)
         else:
@@ -138,12 +138,3 @@ class HokuyoSensor:
             )
             casts.append((hits, beams))
         return casts
-
-
-def _nearest_first(seen: np.ndarray, millimetres: np.ndarray, intensities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The echoes in the unit's range, nearest first, -1 after them (one out of range leaves no gap)."""
-    order = np.argsort(~seen, axis=-1, kind="stable")
-    kept = np.take_along_axis(seen, order, -1)
-    echoes = np.where(kept, np.take_along_axis(millimetres, order, -1), -1)
-    strengths = np.where(kept, np.take_along_axis(intensities, order, -1), -1)
-    return echoes, strengths

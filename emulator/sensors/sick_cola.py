@@ -22,7 +22,7 @@ from emulator.optics import BeamHits, PreparedBeams, World
 from emulator.scene.model import Scene, SensorSpec
 from emulator.scene.sick_models import ANGLE_TICKS_PER_DEG, FREQUENCY_TICKS_PER_HZ, MODELS, SickModel
 from emulator.sensors.mount import SensorMount, cast_moving
-from emulator.sensors.physical.multi_echo import echo_lists_at, intensity_of
+from emulator.sensors.physical.multi_echo import echo_lists_at, intensity_of, nearest_first
 from emulator.sensors.physical.params import DEFAULT_PARAMS, PULSED_RECEIVERS
 from emulator.sensors.response import Beams, response_model, values_at_instants
 from emulator.sensors.scan import Scan, simulated_instant
@@ -162,7 +162,7 @@ class ColaSensor:
             lists = echo_lists_at(hits, beams, receiver, DEFAULT_PARAMS, fog_filter=fog_filter)
             in_range = np.isfinite(lists.ranges_m) & (lists.ranges_m >= sick.min_range_m) & (lists.ranges_m <= sick.max_range_m)
             counts = np.rint(np.where(in_range, lists.ranges_m, 0.0) * 1000.0 / sick.distance_scale).astype(np.int64)
-            echoes, powers = _nearest_first(in_range, counts, lists.intensities(receiver))
+            echoes, powers = nearest_first(in_range, counts, lists.intensities(receiver))
             return echoes, powers
         millimetres = values_at_instants(self._response, "lms_values", hits, beams, "mm", field_bits=FIELD_BITS)
         millimetres = millimetres.astype(np.int64)
@@ -186,15 +186,6 @@ class ColaSensor:
     @property
     def configured_period_s(self) -> float:
         return FREQUENCY_TICKS_PER_HZ / configured_request(self.spec.options)["frequency_ticks"]
-
-
-def _nearest_first(seen: np.ndarray, counts: np.ndarray, intensities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The echoes in the unit's range, nearest first, -1 after them (one out of range leaves no gap)."""
-    order = np.argsort(~seen, axis=-1, kind="stable")
-    kept = np.take_along_axis(seen, order, -1)
-    echoes = np.where(kept, np.take_along_axis(counts, order, -1), -1)
-    powers = np.where(kept, np.take_along_axis(intensities, order, -1), -1)
-    return echoes, powers
 
 
 DENSE_BEAMS = 1000  # a scan with more beams is streamed DENSE_BATCH scans per job

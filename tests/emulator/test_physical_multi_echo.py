@@ -21,6 +21,7 @@ from emulator.sensors.physical.multi_echo import (
     echo_lists,
     echo_lists_at,
     intensity_of,
+    nearest_first,
     select_echoes,
     smoke_returns,
 )
@@ -258,3 +259,15 @@ def test_a_single_return_is_reported_unchanged_or_not_at_all(range_m, power):
         assert lists.count[0] == 1 and lists.ranges_m[0, 0] == range_m and lists.powers[0, 0] == power
     else:
         assert lists.count[0] == 0
+
+
+def test_nearest_first_moves_the_seen_echoes_to_the_front_in_order_and_fills_with_minus_one():
+    rng = np.random.default_rng(3)
+    seen = rng.random((2, 50, 3)) < 0.5
+    values, strengths = rng.integers(0, 60000, seen.shape), rng.integers(0, 9000, seen.shape)
+    echoes, intensities = nearest_first(seen, values, strengths)
+    for index in np.ndindex(seen.shape[:2]):
+        kept = seen[index]
+        expected = list(values[index][kept]) + [-1] * int((~kept).sum())
+        assert list(echoes[index]) == expected
+        assert list(intensities[index]) == list(strengths[index][kept]) + [-1] * int((~kept).sum())

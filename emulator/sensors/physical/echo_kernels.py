@@ -280,3 +280,19 @@ def smoke_bin_powers(
                 spreading *= ramp * ramp
             powers[r, i] = 0.5 * share * (transmission[r, i] - transmission[r, i + 1]) * (spreading / reference_spreading)
     return powers, mid_m
+
+
+@njit(**_COMPILE)
+def packed_nearest_first(seen: np.ndarray, values: np.ndarray, intensities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each row's (N, E) seen echoes moved to the front in their order, -1 after them (values and intensities)."""
+    rows, echoes = seen.shape
+    packed_values = np.full((rows, echoes), -1, dtype=np.int64)
+    packed_intensities = np.full((rows, echoes), -1, dtype=np.int64)
+    for r in range(rows):
+        kept = 0
+        for e in range(echoes):
+            if seen[r, e]:
+                packed_values[r, kept] = values[r, e]
+                packed_intensities[r, kept] = intensities[r, e]
+                kept += 1
+    return packed_values, packed_intensities

@@ -77,6 +77,18 @@ class EchoLists:
         return intensity_of(self.powers, receiver)
 
 
+def nearest_first(seen: np.ndarray, values: np.ndarray, intensities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The echoes a unit sends, (..., E): those `seen` (in its range), nearest first, -1 after them (one out
+    of range leaves no gap); `values` and `intensities` (..., E) int64 in the echo lists' order."""
+    shape = seen.shape
+    packed = echo_kernels.packed_nearest_first(
+        np.ascontiguousarray(seen).reshape(-1, shape[-1]),
+        np.ascontiguousarray(values, dtype=np.int64).reshape(-1, shape[-1]),
+        np.ascontiguousarray(intensities, dtype=np.int64).reshape(-1, shape[-1]),
+    )
+    return packed[0].reshape(shape), packed[1].reshape(shape)
+
+
 def intensity_of(powers: np.ndarray, receiver: PulsedReceiver) -> np.ndarray:
     """Received power (reference units) → the unit's intensity: linear, saturating at `intensity_max`."""
     return np.minimum(np.rint(powers * receiver.intensity_reference), receiver.intensity_max).astype(np.int64)
