@@ -4,7 +4,8 @@ compiled (tests/emulator/data/physical_pinned.npz). A speed-up must change no sc
 one wire unit (floating-point reordering).
 
 `python tests/emulator/test_physical_pinned.py` rewrites the reference: do it only for a deliberate
-change of the physics, and say so in the commit.
+change of the physics (the plume integration's too), and say so in the commit. A speed-up is checked
+the other way round: rewrite it with the change reverted, then run this test with it applied.
 """
 
 from __future__ import annotations

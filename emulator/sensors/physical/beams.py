@@ -25,7 +25,6 @@ from emulator.optics.kept import KeptPerArrays
 from emulator.optics.puffs import BeamPuffCrossings, Puffs, cross_beams
 from emulator.scene.material_optics import optics_for, patch_values
 from emulator.sensors.beam_geometry import scan_plane_rays
-from emulator.sensors.physical import echo_kernels
 from emulator.sensors.physical.echo import echoing, log_clear_air_echo, reference_spreading
 from emulator.sensors.physical.noise import fluctuation_factor
 from emulator.sensors.physical.params import PhysicalParams, ReceiverOptics
@@ -567,6 +566,8 @@ def _smoke_echoes(
     receiver: ReceiverOptics,
     params: PhysicalParams,
 ) -> SmokeEchoes:
+    from emulator.sensors.physical import echo_kernels  # numba loads with the first `physical` scan
+
     rows = np.flatnonzero(np.isfinite(start) & (end > start)) if params.backscatter else np.zeros(0, dtype=np.int64)
     low = start[rows]
     length = end[rows] - low

@@ -34,7 +34,6 @@ from typing import Sequence
 import numpy as np
 
 from emulator.optics import BeamHits
-from emulator.sensors.physical import echo_kernels
 from emulator.sensors.physical.beams import (
     PUFFS_PER_PASS,
     Instants,
@@ -80,6 +79,8 @@ class EchoLists:
 def nearest_first(seen: np.ndarray, values: np.ndarray, intensities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The echoes a unit sends, (..., E): those `seen` (in its range), nearest first, -1 after them (one out
     of range leaves no gap); `values` and `intensities` (..., E) int64 in the echo lists' order."""
+    from emulator.sensors.physical import echo_kernels  # numba loads with the first `physical` scan
+
     shape = seen.shape
     packed = echo_kernels.packed_nearest_first(
         np.ascontiguousarray(seen).reshape(-1, shape[-1]),
@@ -150,6 +151,8 @@ def smoke_returns(smoke: SmokeEchoes, receiver: PulsedReceiver, threshold: float
     among them); each run of samples at or above the detection level is a return, placed where the
     signal first reaches it (linear between samples) with the run's strongest sample as its power.
     """
+    from emulator.sensors.physical import echo_kernels  # numba loads with the first `physical` scan
+
     near_m, near_threshold = _near_level(threshold, receiver, fog_filter)
     # only rows whose densest bin holds the threshold within a pulse length can return anything (the
     # cumulative is linear within bins)
@@ -171,6 +174,8 @@ def _selected(ranges_m: np.ndarray, powers: np.ndarray, smoke_of: np.ndarray, sm
               smoke_powers: np.ndarray, threshold: float, receiver: PulsedReceiver, fog_filter: bool) -> EchoLists:
     """`select_echoes` of each row's candidates (N, C) followed by its row `smoke_of` (-1: none) of the
     smoke's returns (R, J), without building the (N, C + J) candidates."""
+    from emulator.sensors.physical import echo_kernels  # numba loads with the first `physical` scan
+
     near_m, near_threshold = _near_level(threshold, receiver, fog_filter)
     return EchoLists(*echo_kernels.kept_echoes(
         np.ascontiguousarray(ranges_m, dtype=float), np.ascontiguousarray(powers, dtype=float), smoke_of,
