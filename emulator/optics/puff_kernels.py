@@ -29,7 +29,7 @@ _TABLE = np.stack([
 CDF_ERROR = 1e-9  # cubic Hermite interpolation: at most step^4 / 384 x max |4th derivative of Phi| (< 1e-10), plus rounding
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy")
 def _cdf(z: float) -> float:
     """Phi(z) by cubic Hermite interpolation between nodes 1/64 sigma apart holding Phi and its slope
     (|error| < CDF_ERROR): erfc itself costs several times more, and pairs × grid points call it
