@@ -35,7 +35,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -44,6 +44,7 @@ from emulator.bench.serve_process import ServeProcess
 from emulator.scene import load_scene
 from emulator.scene.sick_models import MODELS
 from emulator.sensors.sick_cola import configured_request, power_on_phase_ms
+from emulator.transport.timer import LATE_THRESHOLDS_MS
 from protocols.cola.framing import ColaReader, Dialect, frame
 
 ROOM = """
@@ -137,9 +138,11 @@ class Stream:
 Address = tuple[str, int]
 
 
-def _stream(sources: dict[str, tuple[Address, float]], duration_s: float, warm_up_s: float = 1.0) -> list[Stream]:
+def _stream(sources: dict[str, tuple[Address, float]], duration_s: float, warm_up_s: float = 1.0,
+            on_window: Callable[[], None] = lambda: None) -> list[Stream]:
     """Stream from every named source (address, period) to its own CoLa-B client for `duration_s`, from
-    `warm_up_s` after every source has sent its first telegram."""
+    `warm_up_s` after every source has sent its first telegram; `on_window` is called as the measuring
+    window opens and as it closes."""
     selector = selectors.DefaultSelector()
     streams = []
     for name, (address, period_s) in sources.items():
@@ -154,15 +157,20 @@ def _stream(sources: dict[str, tuple[Address, float]], duration_s: float, warm_u
     realtime_to_monotonic = time.time() - time.monotonic()  # the kernel stamps packets on CLOCK_REALTIME
     give_up = time.monotonic() + FIRST_TELEGRAM_TIMEOUT_S
     start = None  # once every stream has sent its first telegram (a worker's first scans may take seconds)
+    window_open = False
     try:
         while start is None or time.monotonic() < start + warm_up_s + duration_s:
             for key, _ in selector.select(timeout=0.1):
                 key.data.receive(realtime_to_monotonic, keep=start is not None and time.monotonic() >= start + warm_up_s)
+            if not window_open and start is not None and time.monotonic() >= start + warm_up_s:
+                window_open = True
+                on_window()
             if start is None and all(stream.streaming for stream in streams):
                 start = time.monotonic()
             elif start is None and time.monotonic() > give_up:
                 raise RuntimeError(f"no telegram from {[s.name for s in streams if not s.streaming]}"
                                    f" in {FIRST_TELEGRAM_TIMEOUT_S:g} s")
+        on_window()
     finally:
         for key in list(selector.get_map().values()):
             key.fileobj.close()
@@ -199,9 +207,32 @@ def _floor(scene_path: Path) -> Iterator[dict[str, Address]]:
         process.wait(10)
 
 
-def _rows(case: str, streams: list[Stream]) -> list[dict]:
+def _rows(case: str, streams: list[Stream], counters: list[dict[str, int]] | None = None) -> list[dict]:
+    """A row per stream, with the load average and, for a daemon, its own count of timer wake-ups in the
+    window and the share more than 1, 2, 5 ms late (SIGUSR1 stats: what its loop saw, whatever the client)."""
     load = os.getloadavg()[0]
-    return [{"case": case, **stream.summary(), "load": load} for stream in streams]
+    daemon: dict = {}
+    if counters is not None and len(counters) == 2:
+        before, after = counters
+        wakes = after["wakes"] - before["wakes"]
+        daemon = {"loop_wakes": wakes, **{f"loop_late_{ms}ms": (after[f"late_{ms}ms"] - before[f"late_{ms}ms"]) / wakes
+                                          if wakes else float("nan") for ms in LATE_THRESHOLDS_MS}}
+    return [{"case": case, **stream.summary(), "load": load, **daemon} for stream in streams]
+
+
+def _served(scene: Path, names: dict[str, float], workers: int, duration_s: float) -> list[dict]:
+    """The scene's sensors streamed from a daemon, one row each."""
+    with ServeProcess(scene, [f"{name}=tcp:127.0.0.1:0" for name in names], extra_args=("--workers", str(workers))) as daemon:
+        counters: list[dict[str, int]] = []
+        streams = _stream({name: (daemon.endpoint(name, "tcp").address, period) for name, period in names.items()},
+                          duration_s, on_window=lambda: counters.append(daemon.stats()))
+        return _rows("lms511-fine" if "lms511" in names else "six-units", streams, counters)
+
+
+def _floored(scene: Path, names: dict[str, float], duration_s: float) -> list[dict]:
+    """The same streams from bare senders, one row each."""
+    with _floor(scene) as addresses:
+        return _rows("floor", _stream({name: (addresses[name], period) for name, period in names.items()}, duration_s))
 
 
 def bench_section(quick: bool) -> tuple[dict, list[str]]:
@@ -209,24 +240,18 @@ def bench_section(quick: bool) -> tuple[dict, list[str]]:
     rows = []
     with tempfile.TemporaryDirectory(prefix="cola-bench-") as folder:
         fine = _scene(Path(folder), [("lms511", "lms511", 'scan_frequency_hz = 25\nresolution_deg = 0.1667\n')], "physical")
-        with ServeProcess(fine, ["lms511=tcp:127.0.0.1:0"], extra_args=("--workers", "1")) as daemon:
-            rows += _rows("lms511-fine", _stream({"lms511": (daemon.endpoint("lms511", "tcp").address, 0.04)}, duration_s))
-        with _floor(fine) as addresses:
-            rows += _rows("floor", _stream({"lms511": (addresses["lms511"], 0.04)}, duration_s))
+        rows += _served(fine, {"lms511": 0.04}, 1, duration_s) + _floored(fine, {"lms511": 0.04}, duration_s)
         six = [(f"tim{i}", "tim571", "") for i in range(4)] + [(f"lms{i}", "lms111", "") for i in range(2)]
         periods = {name: (1 / 15 if model == "tim571" else 0.02) for name, model, _ in six}
         six_scene = _scene(Path(folder), six, "formsma2011")
-        with ServeProcess(six_scene, [f"{name}=tcp:127.0.0.1:0" for name, _, _ in six], extra_args=("--workers", "0")) as daemon:
-            rows += _rows("six-units", _stream({name: (daemon.endpoint(name, "tcp").address, period)
-                                                for name, period in periods.items()}, duration_s))
-        with _floor(six_scene) as addresses:
-            rows += _rows("floor", _stream({name: (addresses[name], period) for name, period in periods.items()}, duration_s))
+        rows += _served(six_scene, periods, 0, duration_s) + _floored(six_scene, periods, duration_s)
     lines = ["cola: CoLa-B streams through the daemon, and from bare timerfd senders (floor): arrival-time jitter,"
-             " gaps within 5 % of the period, load average",
+             " gaps within 5 % of the period, load average; the daemon's timer wake-ups more than 1 ms late",
              f"  {'case':<12} {'client':<7} {'period':>7} {'scans':>6} {'missed':>6} {'gaps±5%':>8} {'p99 ms':>7} {'max ms':>7}"
-             f" {'load':>5}"]
+             f" {'load':>5} {'wake>1ms':>8}"]
     for row in rows:
+        late = f"{row['loop_late_1ms']:>8.1%}" if "loop_late_1ms" in row else f"{'':>8}"
         lines.append(f"  {row['case']:<12} {row['client']:<7} {row['period_ms']:>7.1f} {row['telegrams']:>6} {row['missed']:>6}"
                      f" {row['gaps_within_5pct']:>8.1%} {row['jitter_p99_ms']:>7.2f} {row['jitter_max_ms']:>7.2f}"
-                     f" {row['load']:>5.2f}")
+                     f" {row['load']:>5.2f} {late}")
     return {"cola": rows}, lines

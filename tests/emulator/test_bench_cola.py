@@ -22,6 +22,9 @@ def test_the_cola_section_reports_each_case_and_its_floor_with_the_load():
         assert row["telegrams"] > 0 and row["load"] > 0 and 0 <= row["jitter_p99_ms"] <= row["jitter_max_ms"], row
         if row["case"] == "floor":  # a bare sender sends every scan: 3 s of them with --quick
             assert row["missed"] == 0 and abs(row["telegrams"] - 3000 / row["period_ms"]) <= 2, row
+            assert "loop_wakes" not in row
+        else:  # the daemon's own count of its timer wake-ups in the window (SIGUSR1 stats)
+            assert row["loop_wakes"] > 0 and 0 <= row["loop_late_5ms"] <= row["loop_late_2ms"] <= row["loop_late_1ms"] <= 1
 
 
 def test_a_floor_telegram_is_a_daemons_telegram_of_the_same_size():
