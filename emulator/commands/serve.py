@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import gc
 import importlib
 import math
 import os
@@ -324,6 +325,9 @@ def _announce(ready: Ready) -> None:
 
 
 def _started(server: ControlServer | None, watching: Watching | None) -> None:
+    # Everything built so far (scene, world, sessions) lives as long as the daemon: out of the
+    # collector's sight, a full collection no longer stops the loop for 50-80 ms walking it.
+    gc.freeze()
     if server is not None:
         print(f"ready control {server.address.url}", flush=True)
     if watching is not None:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
+import gc
 import math
 import os
 import sys
@@ -633,6 +634,7 @@ class Daemon:
             "served_scans": sum(cache.served for cache in self.scan_caches.values()),
             "tasks": len(asyncio.all_tasks()),
             "fds": len(os.listdir("/proc/self/fd")),
+            "gc_frozen": gc.get_freeze_count(),  # objects kept out of the collector's sight (serve freezes them once started)
             "wakes": timer.wakes if timer is not None else 0,
             **{f"late_{ms}ms": timer.late[index] if timer is not None else 0 for index, ms in enumerate(LATE_THRESHOLDS_MS)},
         }
