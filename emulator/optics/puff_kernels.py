@@ -87,6 +87,8 @@ def fan_crossings(
         centre = math.atan2(y, x)
         for turn in range(3):
             shift = (turn - 1) * 2.0 * math.pi
+            if turn != 1 and not (beam_angle[0] <= centre + shift + half and centre + shift - half <= beam_angle[n - 1]):
+                continue  # an interval one turn away meets no beam (the usual case): no search
             lo = np.searchsorted(beam_angle, centre + shift - half, side="left")
             hi = np.searchsorted(beam_angle, centre + shift + half, side="right")
             if hi > lo:
@@ -150,12 +152,12 @@ def path_to(
         r = position[row[q]]
         if r < 0:
             continue
-        a, s, c, b = along[q], sigma[q], column[q], before[q]
+        a, inverse, c, b = along[q], 1.0 / sigma[q], column[q], before[q]
         for m in range(width):
             limit = limits[r, m]
             if limit == 0.0 or (m > 0 and limit == limits[r, 0]):
                 continue
-            z = (limit - a) / s if limit < 1e12 else SATURATED + 1.0  # inf and NaN: past every puff
+            z = (limit - a) * inverse if limit < 1e12 else SATURATED + 1.0  # inf and NaN: past every puff
             if z >= SATURATED:
                 result[r, m] += c * (1.0 - b)
             elif z > -SATURATED:
