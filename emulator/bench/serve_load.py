@@ -395,7 +395,7 @@ UTM_SCENE, UTM_SENSOR, UTM_PRESET = "rescue", "utm", "physical"
 UTM_SLOWEST_AT_S = 59.0
 UTM_WINDOW_S = 40.0
 UTM_TOLERANCE = 0.05
-UTM_START_UP_S = 15.0  # allowance for the daemon's start (its workers build rescue's world) before the warm-up
+UTM_START_UP_S = 30.0  # allowance for the daemon's start before the warm-up (its worker builds rescue's world and compiles the echo walks: 24 s at load 5)
 
 
 def me_unlimited(hokuyo: str) -> bytes:
