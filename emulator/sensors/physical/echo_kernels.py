@@ -1,5 +1,6 @@
-"""Compiled per-beam walks of the multi-echo receiver (`multi_echo`): the smoke's returns along each
-beam's range grid, and the merging and keeping of each beam's returns.
+"""Compiled per-beam walks of the `physical` model: the smoke bins' backscattered power (`beams`), and
+for the multi-echo receiver (`multi_echo`) the smoke's returns along each beam's range grid, the
+merging and keeping of each beam's returns, and the packing of the echoes a unit sends.
 
 Each beam's walk is a short sequential scan (a cumulative sum, a merge of two sorted sample lists,
 runs above a level, a sort of a handful of candidates). In numpy every step is a pass over
@@ -8,7 +9,7 @@ runs above a level, a sort of a handful of candidates). In numpy every step is a
 operation, so the values are the same to the last bit.
 
 Compiled on first use and cached on disk (`cache=True`): a fresh process with a warm cache loads them
-in well under a second.
+in well under a second; the first process after an install compiles them (seconds: docs/performance.md).
 """
 
 from __future__ import annotations
