@@ -71,11 +71,11 @@ def cross_instants(
         pieces.append(cross_beams(Puffs.concatenate([parts[k] for k in group]), origins[rows], directions[rows], beam_end_m[rows], offsets))
     rows = max((len(piece.pooled_column) for piece in pieces), default=0)
     pooled = np.zeros(rows)
-    reach = np.zeros(rows)
+    end = np.zeros(rows)
     for piece in pieces:  # each row's pooled pairs come from one piece (its instant's)
         pooled[: len(piece.pooled_column)] += piece.pooled_column
-        np.maximum(reach[: len(piece.pooled_reach_m)], piece.pooled_reach_m, out=reach[: len(piece.pooled_reach_m)])
-    return BeamPuffCrossings(*(np.concatenate([getattr(piece, name) for piece in pieces]) for name in _FIELDS), pooled, reach)
+        np.maximum(end[: len(piece.pooled_end_m)], piece.pooled_end_m, out=end[: len(piece.pooled_end_m)])
+    return BeamPuffCrossings(*(np.concatenate([getattr(piece, name) for piece in pieces]) for name in _FIELDS), pooled, end)
 
 
 _FIELDS = ("beam", "along_m", "sigma", "column", "before_origin", "near")

@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit
 
 SATURATED = 8.3  # |z| beyond this: Phi is 0 or 1 to within 1e-16
-WINDOW = 6.0  # range bins and pooled pairs: beyond this Phi is taken as 0 or 1
+WINDOW = 6.0  # range bins: beyond this Phi is taken as 0 or 1
 WINDOW_ERROR = 1e-9  # Phi(-WINDOW) = 9.9e-10: what that costs, per pair, in units of its column
 _STEPS_PER_SIGMA = 64
 _NODES = np.arange(-SATURATED, SATURATED + 2.0 / _STEPS_PER_SIGMA, 1.0 / _STEPS_PER_SIGMA)
@@ -59,11 +59,10 @@ def fan_crossings(
     centre before the beam's end + that reach (and not wholly behind the origin). `axes` rows: the
     fan's normal, first and second in-plane axes; `beam_angle` ascending. Pairs come puff by puff,
     beams ascending; a pair's row is its beam + `row_offset[p]`. Returns row, along, sigma, column,
-    Phi(−along/sigma) and whether the pair lies within `near_sigmas` (the old, shorter reach); then per
-    row (`rows` of them) the pooled columns of its faint pairs (beyond `near_sigmas`) whose Gaussian
-    (±WINDOW sigma) lies between the origin and the beam's end, and where the farthest of those
-    ends: such a pair adds its column (within WINDOW_ERROR of it) to any path reaching past that, so it is summed
-    here instead of kept (most pairs of a dense plume are such)."""
+    Phi(−along/sigma) and whether the pair lies within `near_sigmas`, for those pairs only; then per
+    row (`rows` of them) the summed share of its faint pairs (beyond `near_sigmas`) from the origin
+    to the beam's end, and that end: most pairs of a dense plume are faint, and what they add is
+    needed only there (the range bins read the near pairs), so they are summed here, not kept."""
     count = len(sigma)
     n = len(beam_angle)
     low = np.zeros((count, 3), dtype=np.int64)
@@ -101,7 +100,7 @@ def fan_crossings(
     before_of = np.empty(total)
     near_of = np.empty(total, dtype=np.bool_)
     pooled_column = np.zeros(rows)
-    pooled_reach = np.zeros(rows)
+    pooled_end = np.zeros(rows)
     kept = 0
     for p in range(count):
         s = sigma[p]
@@ -122,29 +121,31 @@ def fan_crossings(
                     continue
                 is_near = miss_sq < near_sq and along < beam_end[b] + near and (along > 0.0 or distance_sq < near_sq)
                 column = central_column[p] * math.exp(-miss_sq * inverse_two_var)
+                before = _cdf(-along / s) if along < SATURATED * s else 0.0
                 r = b + row_offset[p]
-                if not is_near and along >= WINDOW * s and along + WINDOW * s <= beam_end[b]:
-                    pooled_column[r] += column
-                    pooled_reach[r] = max(pooled_reach[r], along + WINDOW * s)
+                if not is_near:
+                    to_end = (beam_end[b] - along) / s if beam_end[b] < 1e12 else SATURATED
+                    pooled_column[r] += column * (_cdf(to_end) - before)
+                    pooled_end[r] = beam_end[b]
                     continue
                 row[kept] = r
                 along_of[kept] = along
                 sigma_of[kept] = s
                 column_of[kept] = column
-                before_of[kept] = _cdf(-along / s) if along < SATURATED * s else 0.0
-                near_of[kept] = is_near
+                before_of[kept] = before
+                near_of[kept] = True
                 kept += 1
-    return row[:kept], along_of[:kept], sigma_of[:kept], column_of[:kept], before_of[:kept], near_of[:kept], pooled_column, pooled_reach
+    return row[:kept], along_of[:kept], sigma_of[:kept], column_of[:kept], before_of[:kept], near_of[:kept], pooled_column, pooled_end
 
 
 @njit(cache=True, error_model="numpy")
 def path_to(
     limits: np.ndarray, position: np.ndarray, row: np.ndarray, along: np.ndarray, sigma: np.ndarray, column: np.ndarray,
-    before: np.ndarray, pooled_column: np.ndarray, pooled_reach: np.ndarray,
+    before: np.ndarray, pooled_column: np.ndarray, pooled_end: np.ndarray,
 ) -> np.ndarray:
     """Optical path from each beam's origin to its `limits` (R, M) (inf or NaN: the whole way), for the
     rows whose `position[row]` ≥ 0 (their line in `limits`); a limit of 0 gives exactly 0. A row's
-    pooled column (see fan_crossings) counts for its limits past its pooled reach. A later limit equal
+    pooled share (see fan_crossings) counts for its limits from its beam's end on. A later limit equal
     to the row's first is not summed again but copied (the same terms in the same order)."""
     count, width = limits.shape
     result = np.zeros((count, width))
@@ -168,7 +169,7 @@ def path_to(
             continue
         for m in range(width):
             limit = limits[r, m]
-            if limit != 0.0 and not limit < pooled_reach[i]:  # NaN: the whole way
+            if limit != 0.0 and not limit < pooled_end[i]:  # NaN: the whole way
                 result[r, m] += pooled_column[i]
     for r in range(count):
         for m in range(1, width):

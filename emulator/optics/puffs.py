@@ -93,10 +93,11 @@ class BeamPuffCrossings:
     lies within REACH_SIGMAS (it sets where the beam's smoke starts and ends;
     the others only add their faint tails to the paths).
 
-    Per beam index, `pooled_column` sums the faint pairs not kept (wholly
-    between the origin and the beam's end: their whole column counts for any
-    limit from `pooled_reach_m` on; a nearer limit, as a footprint's nearer
-    surface may be, leaves them out, each under 1.2 % of its puff's column).
+    Per beam index, `pooled_column` sums what a fan's faint pairs (beyond
+    REACH_SIGMAS, not kept) add from the origin to the beam's end
+    `pooled_end_m`; it counts for limits from that end on. A nearer limit, as
+    a footprint's nearer surface may be, and the range bins leave them out
+    (each under 1.2 % of its puff's column), as the 3 sigma sum always did.
     """
 
     beam: np.ndarray
@@ -106,7 +107,7 @@ class BeamPuffCrossings:
     before_origin: np.ndarray
     near: np.ndarray
     pooled_column: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    pooled_reach_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    pooled_end_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def __len__(self) -> int:
         return len(self.beam)
@@ -125,7 +126,7 @@ class BeamPuffCrossings:
         per_beam = np.ascontiguousarray(limits.reshape(len(limits), -1))
         position = self._positions(len(per_beam) if rows is None else None, rows)
         path = _kernels().path_to(
-            per_beam, position, self.beam, self.along_m, self.sigma, self.column, self.before_origin, self.pooled_column, self.pooled_reach_m
+            per_beam, position, self.beam, self.along_m, self.sigma, self.column, self.before_origin, self.pooled_column, self.pooled_end_m
         )
         return path.reshape(limits.shape)
 

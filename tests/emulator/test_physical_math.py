@@ -105,7 +105,7 @@ def test_puff_path_on_a_grid_equals_the_path_to_each_grid_point(seed, growth, bi
     assert np.all(np.abs(on_grid - expected) < (WINDOW_ERROR + 2 * CDF_ERROR) * column_per_row[:, None] + 1e-15)
     # the faint tails beyond REACH_SIGMAS are in every path but not in the bins: they add at most their columns
     tails = np.bincount(crossings.beam[~near], weights=crossings.column[~near], minlength=len(angles))[rows]
-    tails += crossings.pooled_column[rows]
+    tails = tails + crossings.pooled_column[rows]
     assert np.all(crossings.optical_path_to(grid, rows) - on_grid <= tails[:, None] + 1e-12)
 
 

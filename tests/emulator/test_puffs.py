@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from emulator.optics.puff_kernels import WINDOW, WINDOW_ERROR
+from emulator.optics.puff_kernels import normal_cdf
 from emulator.optics.puffs import REACH_SIGMAS, BeamPuffCrossings, Puffs, cross_beams
 from emulator.scene.plumes import Particles
 
@@ -49,23 +49,20 @@ def _fan_and_brute(puffs: Puffs, end: np.ndarray) -> tuple[BeamPuffCrossings, Be
 def test_a_full_circle_fan_finds_the_same_pairs_as_brute_force(puffs):
     end = np.random.default_rng(5).uniform(0.5, 5.0, 720)  # ends short of many puffs
     fan, brute = _fan_and_brute(puffs, end)
-    # the fan pools its faint pairs that lie wholly between the origin and the beam's end; brute force keeps them all
-    window = WINDOW * brute.sigma
-    pooled = ~brute.near & (brute.along_m >= window) & (brute.along_m + window <= end[brute.beam])
-    assert pooled.sum() > 100
-    kept = BeamPuffCrossings(*(getattr(brute, name)[~pooled] for name in ("beam", "along_m", "sigma", "column", "before_origin", "near")))
+    # the fan keeps its near pairs and sums what the faint ones add up to each beam's end; brute force keeps them all
+    faint = ~brute.near
+    assert faint.sum() > 100
+    kept = BeamPuffCrossings(*(getattr(brute, name)[~faint] for name in ("beam", "along_m", "sigma", "column", "before_origin", "near")))
     fan_beam, fan_fields = _sorted(fan)
     brute_beam, brute_fields = _sorted(kept)
     assert len(fan) > 2000
     assert len(np.unique(fan.beam)) > 600  # beams on every side, across the wrap at ±pi
     np.testing.assert_array_equal(fan_beam, brute_beam)
     np.testing.assert_allclose(fan_fields, brute_fields, rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(fan.pooled_column, np.bincount(brute.beam[pooled], weights=brute.column[pooled], minlength=720), rtol=1e-9)
-    reach = np.zeros(720)
-    np.maximum.at(reach, brute.beam[pooled], (brute.along_m + window)[pooled])
-    np.testing.assert_allclose(fan.pooled_reach_m, reach, rtol=1e-12)
-    columns = np.bincount(brute.beam, weights=brute.column, minlength=720)
-    assert np.all(np.abs(fan.optical_path_to(end) - brute.optical_path_to(end)) <= 2 * WINDOW_ERROR * columns + 1e-15)
+    share = brute.column * (normal_cdf((end[brute.beam] - brute.along_m) / brute.sigma) - brute.before_origin)
+    np.testing.assert_allclose(fan.pooled_column, np.bincount(brute.beam[faint], weights=share[faint], minlength=720), rtol=1e-9, atol=1e-15)
+    np.testing.assert_array_equal(fan.pooled_end_m[np.unique(brute.beam[faint])], end[np.unique(brute.beam[faint])])
+    np.testing.assert_allclose(fan.optical_path_to(end), brute.optical_path_to(end), rtol=1e-9, atol=1e-15)
 
 
 def test_puffs_far_from_every_beam_cross_nothing():
@@ -76,8 +73,10 @@ def test_puffs_far_from_every_beam_cross_nothing():
 
 def test_extent_spans_every_near_puffs_reach_and_nothing_else(puffs):
     some = Puffs(puffs.centers[20:80], puffs.sigma[20:80], puffs.peak_density[20:80])  # none around the origin
-    crossings, _ = _fan_and_brute(some, np.full(720, 4.0))
+    fan, crossings = _fan_and_brute(some, np.full(720, 4.0))  # brute force keeps its faint pairs too
     start, end = crossings.extent_m(720)
+    for mine, theirs in zip(fan.extent_m(720), (start, end)):  # the fan keeps only the near ones: the same extent
+        np.testing.assert_allclose(mine, theirs, rtol=1e-12, atol=1e-9)  # brute force's first origin is 1e-12 off
     near = crossings.beam[crossings.near]
     assert 0 < len(near) < len(crossings)  # the faint tails beyond REACH_SIGMAS are summed, not spanned
     for beam in np.unique(near)[[0, 1, 7, 50, -2, -1]]:
