@@ -110,6 +110,8 @@ def _worker_main(
 
     world = World(scene)
     sensors = {name: create_sensor(scene, name, world=world) for name in sensor_names}
+    for sensor in sensors.values():  # load (or compile) the numba kernels and build each sensor's arrays now:
+        sensor.configured_scan(0.0)  # a first job that did it took ~1 s, and spaced the streams for seconds
     gc.freeze()  # the world lives as long as the worker: a full collection need not walk it (50-80 ms)
     os.nice(nice)
     connection.send(("ready", multiprocessing.current_process().pid))
