@@ -25,6 +25,11 @@ RUN pip install --no-cache-dir . \
 USER 10001:10001
 WORKDIR /home/lrf
 
+# numba compiles the physical model's and the plumes' kernels on first use (10-30 s): compile them
+# now into a cache the sensor user owns, so a container's first scans are on time.
+ENV NUMBA_CACHE_DIR=/home/lrf/.numba-cache
+RUN python -c "from emulator.sensors.physical.warm import compile_kernels; compile_kernels()"
+
 EXPOSE 10940/tcp 10941/tcp
 
 ENTRYPOINT ["lrf-emulator"]

@@ -50,7 +50,7 @@ from emulator.optics import World
 from emulator.scene import bundled_scenes, load_scene
 from emulator.scene.model import Scene, SensorSpec
 from emulator.scene.sick_models import MODELS as SICK_MODELS
-from emulator.sensors import HOKUYO_MODELS, Sensor, create_sensor, hokuyo_model, lms200, sick_cola
+from emulator.sensors import HOKUYO_MODELS, configured_scans, create_sensor, hokuyo_model, lms200, sick_cola
 from emulator.sensors.beam_geometry import scan_plane_rays
 from emulator.sensors.mount import SensorMount
 from emulator.sensors.response import PRESET_MODULES, apply_model_override
@@ -165,15 +165,6 @@ def rays_section(quick: bool) -> Section:
     return {"ratio": ratio, "rays": rows}, lines
 
 
-def _configured_stream(sensor: Sensor, times_s: list[float]) -> None:
-    """The scene-configured scan at each of `times_s`, computed together as the daemon's scan cache does
-    (a CoLa sensor's `scans` default to its scene configuration)."""
-    if isinstance(sensor, lms200.LmsSensor):
-        sensor.scans(times_s, **lms200.configured_window(sensor.spec.options))
-    else:
-        sensor.scans(times_s)
-
-
 def scans_section(quick: bool) -> Section:
     """Compute time per scan at instants spread over the first minute of each scene (smoke on) under each
     preset: one scan alone, and a steady stream (SCAN_BATCH consecutive scans from that instant in one
@@ -194,7 +185,7 @@ def scans_section(quick: bool) -> Section:
                 alone = [_best_seconds(lambda: sensor.configured_scan(float(t)), SCAN_REPEATS) for t in times]
                 streamed = [
                     _best_seconds(
-                        lambda: _configured_stream(sensor, [float(t) + j * period_s for j in range(SCAN_BATCH)]),
+                        lambda: configured_scans(sensor, [float(t) + j * period_s for j in range(SCAN_BATCH)]),
                         SCAN_REPEATS,
                     )
                     / SCAN_BATCH

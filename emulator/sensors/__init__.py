@@ -21,7 +21,7 @@ MODELS = (*HOKUYO_MODELS, lms200.MODEL, *sick_models.NAMES)
 
 __all__ = [
     "HOKUYO_MODELS", "ColaSensor", "HokuyoModel", "HokuyoSensor", "LmsSensor", "MODELS", "Scan", "Sensor", "UrgSensor",
-    "beam_times_s", "create_sensor", "hokuyo_model", "ranges_m", "stream_batch",
+    "beam_times_s", "configured_scans", "create_sensor", "hokuyo_model", "ranges_m", "stream_batch",
 ]  # fmt: skip
 
 
@@ -46,6 +46,14 @@ def create_sensor(scene: Scene, name: str, world: World | None = None) -> Sensor
     if spec.model in sick_models.MODELS:
         return ColaSensor(scene, spec, world)
     raise UserError(f"sensor {name!r}: unknown model {spec.model!r} (known: {', '.join(MODELS)})")
+
+
+def configured_scans(sensor: Sensor, times_s: list[float]) -> list[Scan]:
+    """The scene-configured scan at each of `times_s`, computed together as a daemon streams them (an LMS200's
+    window from its scene options; the others' `scans` default to their scene configuration)."""
+    if isinstance(sensor, LmsSensor):
+        return sensor.scans(times_s, **lms200.configured_window(sensor.spec.options))
+    return sensor.scans(times_s)
 
 
 def stream_batch(spec: SensorSpec) -> int | None:
