@@ -52,15 +52,16 @@ def _cdf(z: float) -> float:
 @njit(cache=True, error_model="numpy")
 def fan_crossings(
     offsets: np.ndarray, sigma: np.ndarray, central_column: np.ndarray, reach_sigmas: np.ndarray, row_offset: np.ndarray,
-    axes: np.ndarray, beam_angle: np.ndarray, directions: np.ndarray, beam_end: np.ndarray, near_sigmas: float, rows: int,
+    axes: np.ndarray, beam_angle: np.ndarray, directions: np.ndarray, beam_end: np.ndarray, near_sigmas: float, kept_sigmas: float,
+    rows: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The (beam, puff) pairs of a fan of beams from one origin: puff p's centre lies at `offsets[p]`
     from the origin; it pairs with every beam that passes within `reach_sigmas[p]` × sigma of its
     centre before the beam's end + that reach (and not wholly behind the origin). `axes` rows: the
     fan's normal, first and second in-plane axes; `beam_angle` ascending. Pairs come puff by puff,
     beams ascending; a pair's row is its beam + `row_offset[p]`. Returns row, along, sigma, column,
-    Phi(−along/sigma) and whether the pair lies within `near_sigmas`, for those pairs only; then per
-    row (`rows` of them) the summed share of its faint pairs (beyond `near_sigmas`) from the origin
+    Phi(−along/sigma) and whether the pair lies within `near_sigmas`, for the pairs within
+    `kept_sigmas` only; then per row (`rows` of them) the summed share of its faint pairs (beyond `kept_sigmas`) from the origin
     to the beam's end, and that end: most pairs of a dense plume are faint, and what they add is
     needed only there (the range bins read the near pairs), so they are summed here, not kept."""
     count = len(sigma)
@@ -108,6 +109,8 @@ def fan_crossings(
         reach_sq = reach * reach
         near = near_sigmas * s
         near_sq = near * near
+        close = kept_sigmas * s
+        close_sq = close * close
         ox, oy, oz = offsets[p, 0], offsets[p, 1], offsets[p, 2]
         distance_sq = ox * ox + oy * oy + oz * oz
         inverse_two_var = 1.0 / (2.0 * s * s)
@@ -123,7 +126,7 @@ def fan_crossings(
                 column = central_column[p] * math.exp(-miss_sq * inverse_two_var)
                 before = _cdf(-along / s) if along < SATURATED * s else 0.0
                 r = b + row_offset[p]
-                if not is_near:
+                if not (miss_sq < close_sq and along < beam_end[b] + close and (along > 0.0 or distance_sq < close_sq)):
                     to_end = (beam_end[b] - along) / s if beam_end[b] < 1e12 else SATURATED
                     pooled_column[r] += column * (_cdf(to_end) - before)
                     pooled_end[r] = beam_end[b]
@@ -133,7 +136,7 @@ def fan_crossings(
                 sigma_of[kept] = s
                 column_of[kept] = column
                 before_of[kept] = before
-                near_of[kept] = True
+                near_of[kept] = is_near
                 kept += 1
     return row[:kept], along_of[:kept], sigma_of[:kept], column_of[:kept], before_of[:kept], near_of[:kept], pooled_column, pooled_end
 
@@ -181,9 +184,9 @@ def path_to(
 @njit(cache=True, error_model="numpy")
 def path_on_grid(
     start: np.ndarray, length: np.ndarray, fractions: np.ndarray, position: np.ndarray, row: np.ndarray, along: np.ndarray,
-    sigma: np.ndarray, column: np.ndarray, before: np.ndarray, near: np.ndarray,
+    sigma: np.ndarray, column: np.ndarray, before: np.ndarray,
 ) -> np.ndarray:
-    """Optical path of the near pairs to start + length × fractions (R, F) of the rows whose
+    """Optical path of the pairs to start + length × fractions (R, F) of the rows whose
     `position[row]` ≥ 0; `fractions` ascend. Past a puff's window each later point gains its whole
     remaining column: added once, at the first such point, and carried along by a running sum."""
     count, width = len(start), len(fractions)
@@ -191,7 +194,7 @@ def path_on_grid(
     past = np.zeros((count, width + 1))
     for q in range(len(row)):
         r = position[row[q]]
-        if r < 0 or not near[q]:
+        if r < 0:
             continue
         inverse = 1.0 / sigma[q]
         c, b = column[q], before[q]

@@ -33,6 +33,7 @@ from emulator.scene.plumes import Particles
 
 SIGMA_PER_EDGE = 1.0 / np.sqrt(2.0 * np.pi)
 REACH_SIGMAS = 3.0  # where a beam's smoke starts and ends (its range bins span this around each near puff)
+BINS_SIGMAS = 4.0  # a fan's pairs kept for the range bins (and every limit); fainter ones count only to the beam's end
 TRUNCATION_BUDGET = 8e-5  # d·m: the most the puffs left out may add to any beam's optical path
 
 
@@ -94,10 +95,10 @@ class BeamPuffCrossings:
     the others only add their faint tails to the paths).
 
     Per beam index, `pooled_column` sums what a fan's faint pairs (beyond
-    REACH_SIGMAS, not kept) add from the origin to the beam's end
+    BINS_SIGMAS, not kept) add from the origin to the beam's end
     `pooled_end_m`; it counts for limits from that end on. A nearer limit, as
     a footprint's nearer surface may be, and the range bins leave them out
-    (each under 1.2 % of its puff's column), as the 3 sigma sum always did.
+    (each under 0.04 % of its puff's column).
     """
 
     beam: np.ndarray
@@ -131,15 +132,15 @@ class BeamPuffCrossings:
         return path.reshape(limits.shape)
 
     def optical_path_on_grid(self, rows: np.ndarray, start_m: np.ndarray, length_m: np.ndarray, fractions: np.ndarray) -> np.ndarray:
-        """The near pairs' `optical_path_to` at the distances start + length × fractions (R, F) of beams
-        `rows`; `fractions` ascend. The range bins' smoke: the faint tails beyond REACH_SIGMAS, summed in
-        every path to a surface or a beam's end, are left out of the bins (a grid point each costs a CDF)."""
+        """The kept pairs' `optical_path_to` at the distances start + length × fractions (R, F) of beams
+        `rows`; `fractions` ascend. The range bins' smoke: a fan's pairs fainter than BINS_SIGMAS, summed
+        into each path to its beam's end, are left out of the bins (a grid point each costs a CDF)."""
         if len(rows) == 0 or len(self) == 0:
             return np.zeros((len(rows), len(fractions)))
         position = self._positions(None, rows)
         return _kernels().path_on_grid(
             np.ascontiguousarray(start_m, dtype=float), np.ascontiguousarray(length_m, dtype=float), np.ascontiguousarray(fractions, dtype=float),
-            position, self.beam, self.along_m, self.sigma, self.column, self.before_origin, self.near,
+            position, self.beam, self.along_m, self.sigma, self.column, self.before_origin,
         )
 
     def extent_m(self, n_beams: int) -> tuple[np.ndarray, np.ndarray]:
@@ -189,7 +190,7 @@ def cross_beams(
         rows = len(origins) + (int(row_offset.max()) if row_offset is not None else 0)
         return BeamPuffCrossings(*_kernels().fan_crossings(
             offsets, puffs.sigma.take(live), puffs.central_column.take(live), reach.take(live), offset_of_row,
-            fan.axes_by_row[:, :, 0].T.copy(), fan.beam_angle, directions, beam_end_m, REACH_SIGMAS, rows,
+            fan.axes_by_row[:, :, 0].T.copy(), fan.beam_angle, directions, beam_end_m, REACH_SIGMAS, BINS_SIGMAS, rows,
         ))
     far = segments.far_from(puffs.centers, reach_of_puff)
     if far.all():

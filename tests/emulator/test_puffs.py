@@ -9,7 +9,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from emulator.optics.puff_kernels import normal_cdf
 from emulator.optics.puffs import REACH_SIGMAS, BeamPuffCrossings, Puffs, cross_beams
 from emulator.scene.plumes import Particles
 
@@ -49,20 +48,21 @@ def _fan_and_brute(puffs: Puffs, end: np.ndarray) -> tuple[BeamPuffCrossings, Be
 def test_a_full_circle_fan_finds_the_same_pairs_as_brute_force(puffs):
     end = np.random.default_rng(5).uniform(0.5, 5.0, 720)  # ends short of many puffs
     fan, brute = _fan_and_brute(puffs, end)
-    # the fan keeps its near pairs and sums what the faint ones add up to each beam's end; brute force keeps them all
-    faint = ~brute.near
-    assert faint.sum() > 100
-    kept = BeamPuffCrossings(*(getattr(brute, name)[~faint] for name in ("beam", "along_m", "sigma", "column", "before_origin", "near")))
-    fan_beam, fan_fields = _sorted(fan)
-    brute_beam, brute_fields = _sorted(kept)
+    # the fan keeps its pairs within BINS_SIGMAS and sums what the fainter ones add up to each beam's end;
+    # brute force keeps them all
+    def keys(crossings):
+        return {(int(b), round(float(a), 9), round(float(s), 12)) for b, a, s in zip(crossings.beam, crossings.along_m, crossings.sigma)}
+
+    fan_keys, brute_keys = keys(fan), keys(brute)
+    near_keys = keys(BeamPuffCrossings(*(getattr(brute, name)[brute.near] for name in ("beam", "along_m", "sigma", "column", "before_origin", "near"))))
+    assert near_keys <= fan_keys <= brute_keys
+    assert len(near_keys) < len(fan_keys) < len(brute_keys)  # some kept beyond 3 sigma for the bins, some summed
     assert len(fan) > 2000
     assert len(np.unique(fan.beam)) > 600  # beams on every side, across the wrap at ±pi
-    np.testing.assert_array_equal(fan_beam, brute_beam)
-    np.testing.assert_allclose(fan_fields, brute_fields, rtol=1e-9, atol=1e-12)
-    share = brute.column * (normal_cdf((end[brute.beam] - brute.along_m) / brute.sigma) - brute.before_origin)
-    np.testing.assert_allclose(fan.pooled_column, np.bincount(brute.beam[faint], weights=share[faint], minlength=720), rtol=1e-9, atol=1e-15)
-    np.testing.assert_array_equal(fan.pooled_end_m[np.unique(brute.beam[faint])], end[np.unique(brute.beam[faint])])
+    summed = np.unique(fan.beam)
+    assert np.all(fan.pooled_end_m[fan.pooled_column > 0] == end[fan.pooled_column > 0])
     np.testing.assert_allclose(fan.optical_path_to(end), brute.optical_path_to(end), rtol=1e-9, atol=1e-15)
+    assert len(summed) > 600
 
 
 def test_puffs_far_from_every_beam_cross_nothing():
