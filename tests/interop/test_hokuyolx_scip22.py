@@ -8,6 +8,7 @@ UTM-30LX-EW lacks the UST's %ST, so it is built with tsync=False.
 from __future__ import annotations
 
 import dataclasses
+import time
 from pathlib import Path
 
 import numpy as np
@@ -17,6 +18,8 @@ from support.interop import scan_values
 
 from emulator.scene import load_scene
 from emulator.sensors import create_sensor
+
+II_RETRY_S = 6.0  # longer than the 4.096 s a ':' can stay in TIME's third character
 
 STEPS = 1081
 
@@ -73,13 +76,16 @@ def test_ust_streams_every_25_ms(ust: HokuyoLX) -> None:
 def sensor_state(client: HokuyoLX) -> dict:
     """hokuyolx's `sensor_state`, read again when it trips on the TIME field: it splits each II line
     on ':', and a real UTM's four-character encoded TIME holds a ':' whenever one of its 6-bit groups
-    is 10 (about one reading in 16). The timer moves on every millisecond, so a second reading parses."""
-    for _ in range(20):
+    is 10. The lowest group moves every millisecond, the next every 64 ms, the third every 4.096 s: a
+    ':' in the third stays for 4.096 s (seconds 40.96-45.06 of the device's clock, then every 262 s),
+    so the readings go on for up to II_RETRY_S of wall time, not a count of quick retries."""
+    deadline = time.monotonic() + II_RETRY_S
+    while time.monotonic() < deadline:
         try:
             return client.sensor_state()
         except ValueError:
-            continue
-    raise AssertionError("II never parsed in 20 readings")
+            time.sleep(0.05)
+    raise AssertionError(f"II never parsed in {II_RETRY_S} s")
 
 
 def test_utm_30lx_ew_over_tcp(utm: HokuyoLX, utm_room: Path) -> None:
