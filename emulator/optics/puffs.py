@@ -189,8 +189,9 @@ def cross_beams(
         offset_of_row = np.zeros(len(live), dtype=np.int64) if row_offset is None else row_offset.take(live).astype(np.int64)
         rows = len(origins) + (int(row_offset.max()) if row_offset is not None else 0)
         return BeamPuffCrossings(*_kernels().fan_crossings(
-            offsets, puffs.sigma.take(live), puffs.central_column.take(live), reach.take(live), offset_of_row,
-            fan.axes_by_row[:, :, 0].T.copy(), fan.beam_angle, directions, beam_end_m, REACH_SIGMAS, BINS_SIGMAS, rows,
+            *map(_read_only, (offsets, puffs.sigma.take(live), puffs.central_column.take(live), reach.take(live),
+                              offset_of_row, fan.axes_by_row[:, :, 0].T.copy(), fan.beam_angle, directions, beam_end_m)),
+            REACH_SIGMAS, BINS_SIGMAS, rows,
         ))
     far = segments.far_from(puffs.centers, reach_of_puff)
     if far.all():
@@ -244,6 +245,15 @@ def crossings_of_candidates(
 
 
 _SQRT_2PI = np.sqrt(2.0 * np.pi)
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    """A read-only view: numba compiles a kernel once per argument type, and writability is part of the type;
+    a fan's beams come cached (read-only) or fresh (a moving sensor's), and each new mix compiled for seconds
+    in the middle of a stream."""
+    view = array.view()
+    view.flags.writeable = False
+    return view
 
 
 def _kernels() -> ModuleType:

@@ -13,9 +13,12 @@ from emulator.scene import load_scene
 from emulator.sensors import configured_scans, create_sensor
 from emulator.sensors.response import apply_model_override
 
-# (bundled scene, sensor, time s): a multi-echo Hokuyo, a single-echo Hokuyo and an LMS200 in a plume, a
-# five-echo LMS511 with its fog filter; each instant has plume puffs in its beams
-SCANS = (("rescue", "utm", 30.0), ("rescue", "urg", 30.0), ("rescue", "lms", 30.0), ("marulan", "lms5", 30.0))
+# (bundled scene, sensor, time s): a multi-echo Hokuyo (standing, then on the moving robot), a single-echo
+# Hokuyo and an LMS200 in a plume, a five-echo LMS511 with its fog filter; each instant has puffs in its beams
+SCANS = (
+    ("rescue", "utm", 30.0), ("rescue", "utm", 59.0), ("rescue", "urg", 30.0), ("rescue", "lms", 30.0),
+    ("marulan", "lms5", 30.0),
+)
 
 
 def compile_kernels() -> None:
