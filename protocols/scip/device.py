@@ -34,7 +34,6 @@ from protocols.scip.requests import (
     parse_scan_request,
 )
 from protocols.scip.streaming import (
-    BIT_RATES,
     EPSILON_S,
     MAX_TAG_CHARS,
     TAG_CHARS,
@@ -328,17 +327,6 @@ class UrgDevice(StreamingDevice):
             self._adjust_mode = False
             return frame(echo, b"00")
         return frame(echo, b"01")
-
-    def _set_bit_rate(self, params: bytes) -> bytes:
-        if not params.isdigit():
-            return b"01"
-        rate = int(params)
-        if rate not in BIT_RATES:
-            return b"02"
-        if rate == self._bit_rate:
-            return b"03"
-        self._bit_rate = rate
-        return b"00"
 
     def _set_speed(self, params: bytes) -> bytes:
         if not params.isdigit():

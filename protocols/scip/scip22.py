@@ -32,7 +32,6 @@ from protocols.scip.framing import Line, LineSplitter
 from protocols.scip.profiles import PROFILES, ScipProfile
 from protocols.scip.requests import SCAN_PARAMETER_CHARS, STREAM_PARAMETER_CHARS, ScanRequest, parse_scan_request
 from protocols.scip.streaming import (
-    BIT_RATES,
     EPSILON_S,
     MAX_TAG_CHARS,
     TAG_CHARS,
@@ -295,15 +294,7 @@ class Scip22Device(StreamingDevice):
         answer); a USB unit accepts the serial rates as the URG-04LX does, without pacing its link."""
         if self.profile.interface == "ethernet":
             return b"0F"
-        if not params.isdigit():
-            return b"01"
-        rate = int(params)
-        if rate not in BIT_RATES:
-            return b"02"
-        if rate == self._bit_rate:
-            return b"03"
-        self._bit_rate = rate
-        return b"00"
+        return super()._set_bit_rate(params)
 
     def _state_code(self) -> bytes:
         if self._adjust_mode:

@@ -41,7 +41,7 @@ class Stream:
 class StreamingDevice:
     """The revolution grid (scan k at phase + k · period, whole milliseconds), the timer
     and the stream. Subclasses set `_scan_source`, `_period_ms`, `_phase_ms`,
-    `_epoch_ms`, `_stream`, `_laser_on` and implement `_scan_body`."""
+    `_epoch_ms`, `_stream`, `_laser_on`, `_bit_rate` and implement `_scan_body`."""
 
     _scan_source: Callable[[float], Any]
     _period_ms: int
@@ -49,10 +49,23 @@ class StreamingDevice:
     _epoch_ms: int
     _stream: Stream | None
     _laser_on: bool
+    _bit_rate: int
 
     def _scan_body(self, scan: Any, request: ScanRequest, command: bytes) -> bytes:
         """Stamp line and data lines of `scan` as `command` sends them."""
         raise NotImplementedError
+
+    def _set_bit_rate(self, params: bytes) -> bytes:
+        """SS on a serial link: 01 not a number, 02 not a rate the unit has, 03 the rate it has already."""
+        if not params.isdigit():
+            return b"01"
+        rate = int(params)
+        if rate not in BIT_RATES:
+            return b"02"
+        if rate == self._bit_rate:
+            return b"03"
+        self._bit_rate = rate
+        return b"00"
 
     # --- the revolution grid -------------------------------------------------------
 
