@@ -47,10 +47,10 @@ def cross_instants(
     if n == 0:
         empty = np.zeros(0)
         return BeamPuffCrossings(np.zeros(0, dtype=np.int64), empty, empty, empty, empty, np.zeros(0, dtype=bool))
-    with np.errstate(invalid="ignore"):  # 0 × an endless beam: NaN, and that instant is crossed alone
-        ends = origins + directions * beam_end_m[:, None]
+    finite_end = np.isfinite(beam_end_m)  # an instant with an endless beam is crossed alone; its ends are not used
+    ends = origins + directions * np.where(finite_end, beam_end_m, 0.0)[:, None]  # never 0 × inf
     several_origins = (origins.reshape(count, n, 3) != origins[::n][:, None, :]).any(axis=(1, 2))
-    together = several_origins & np.isfinite(ends.reshape(count, n * 3)).all(axis=1) & (n > BEAMS_PER_BLOCK)
+    together = several_origins & finite_end.reshape(count, n).all(axis=1) & (n > BEAMS_PER_BLOCK)
     if together.all():
         return _cross_together(parts, origins, directions, beam_end_m, ends, n)
     pieces: list[BeamPuffCrossings] = []

@@ -280,9 +280,9 @@ def _block_pairs(
     of blocks whose segments' bounding box it comes within _BLOCK_MARGIN reaches of. Every pair the
     exact tests in cross_beams keep survives this cut, so the crossings are the same, found cheaper."""
     n_beams, n_puffs = len(origins), len(centers)
-    ends = origins + directions * beam_end_m[:, None]
-    if n_beams <= BEAMS_PER_BLOCK or not np.isfinite(ends).all():
+    if n_beams <= BEAMS_PER_BLOCK or not np.isfinite(beam_end_m).all():  # an endless beam has no box (0 × inf: NaN)
         return _all_pairs(n_beams, n_puffs)
+    ends = origins + directions * beam_end_m[:, None]
     blocks = -(-n_beams // BEAMS_PER_BLOCK)
     block_starts = np.arange(0, n_beams, BEAMS_PER_BLOCK)
     # reduceat: numpy's min/max along the long axis of an (N, 3) array cost several times more

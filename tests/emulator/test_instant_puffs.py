@@ -45,6 +45,7 @@ def _one_at_a_time(parts: list[Puffs], origins: np.ndarray, directions: np.ndarr
     )
 
 
+@pytest.mark.filterwarnings("error")  # an endless beam: never 0 × inf
 @pytest.mark.parametrize("seed", range(6))
 def test_several_instants_in_one_pass_cross_exactly_as_one_instant_at_a_time(seed: int) -> None:
     rng = np.random.default_rng(seed)

@@ -160,3 +160,27 @@ def test_block_cut_of_beams_with_own_origins_keeps_exactly_the_all_pairs_crossin
         slow = cross_beams(*case)
         for name in ("beam", "along_m", "sigma", "column", "before_origin"):
             np.testing.assert_array_equal(getattr(fast, name), getattr(slow, name))
+
+
+@pytest.mark.filterwarnings("error")
+def test_an_endless_beam_among_beams_with_own_origins_crosses_without_nan_and_as_all_pairs(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A beam that meets nothing (end inf) whose direction has a zero component (a level beam: z = 0):
+    no end point exists (0 × inf would be NaN), so no block box either; the pairs are all pairs', with no warning."""
+    import emulator.optics.puffs as puffs_module
+
+    rng = np.random.default_rng(3)
+    angles = np.linspace(-1.0, 1.0, 40)
+    directions = np.stack([np.cos(angles), np.sin(angles), np.zeros(40)], axis=1)
+    origins = np.tile([0.0, 0.0, 0.4], (40, 1))
+    origins[:, 0] += np.arange(40) * 1e-3  # a moving sensor: an origin per beam, no fan
+    end = np.full(40, 1.5)
+    end[3] = np.inf
+    centres = rng.uniform([0.0, -3.0, 0.2], [8.0, 3.0, 0.6], (30, 3))
+    centres[0] = origins[3] + 1.0 * directions[3]  # on the endless beam
+    puffs = Puffs(centres, rng.uniform(0.1, 0.4, 30), rng.uniform(0.1, 1.0, 30))
+    crossed = cross_beams(puffs, origins, directions, end)
+    assert (crossed.beam == 3).any() and len(crossed) > 100
+    monkeypatch.setattr(puffs_module, "_block_pairs", lambda o, d, e, centers, r: puffs_module._all_pairs(len(o), len(centers)))
+    slow = cross_beams(puffs, origins, directions, end)
+    for name in ("beam", "along_m", "sigma", "column", "before_origin"):
+        np.testing.assert_array_equal(getattr(crossed, name), getattr(slow, name))
