@@ -3,7 +3,8 @@
 Every answer is JSON. Client mistakes get a 4xx with `{"error", "key"}` in
 the scene loader's words (404 unknown name or path, 400 a refused value or
 body, 405 a method the path does not take, 409 a change the resource does
-not allow, 413 a body over 64 KiB, 401 a missing or wrong token). Bodies are
+not allow, 413 a body over 64 KiB, 401 a missing or wrong token, 429 twist
+commands for one body faster than control/twist_rate.py allows). Bodies are
 read within 64 KiB, WebSocket messages too; each WebSocket client has a
 bounded queue of outgoing messages, and a client that stops reading is
 dropped when it fills, so it neither grows the daemon's memory nor delays
@@ -18,6 +19,7 @@ import ipaddress
 import json
 import logging
 import struct
+import time
 from socket import SO_LINGER, SO_SNDBUF, SOL_SOCKET
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -25,9 +27,10 @@ from typing import Any, Awaitable, Callable
 
 from aiohttp import WSMsgType, web
 
-from emulator.control.events import ControlError, event_json
+from emulator.control.events import ControlError, event_json, live_bodies
 from emulator.control.scan_feed import ScanFeed
 from emulator.control.session import LiveSession
+from emulator.control.twist_rate import TwistRate
 from emulator.errors import UserError
 from emulator.scene.live import ClockChange, LiveEvent
 
@@ -85,8 +88,12 @@ def check_exposure(address: ControlAddress | None, token: str | None) -> None:
 class ControlServer:
     """The API of one daemon's `LiveSession`, listening on `address`."""
 
-    def __init__(self, session: LiveSession, address: ControlAddress, token: str | None = None) -> None:
+    def __init__(
+        self, session: LiveSession, address: ControlAddress, token: str | None = None,
+        rate_clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.session = session
+        self.twists = TwistRate(live_bodies(session.scene), rate_clock)  # per live body: control/twist_rate.py
         self.address = address
         self._token = token
         self._serializer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="control-json")
@@ -179,6 +186,10 @@ class ControlServer:
 
     def _change_handler(self, op: str) -> Callable[[web.Request], Awaitable[web.Response]]:
         async def handle(request: web.Request) -> web.Response:
+            if op == "twist" and (refused := self.twists.refusal(request.match_info.get("name"))) is not None:
+                error, wait_s = refused  # before the body is even read; answered when the next token is due
+                await asyncio.sleep(wait_s)
+                raise error
             body = await _json_body(request)
             event = self.session.request(op, request.match_info.get("name"), body)
             return web.json_response({"applied": event_json(event), "state": self.session.state()})
@@ -213,25 +224,32 @@ class ControlServer:
                 if message.type != WSMsgType.TEXT:
                     client.offer(_error_message(ControlError(400, "expected a text message holding a JSON object")))
                     continue
-                self._on_message(client, message.data)
+                if (pause_s := self._on_message(client, message.data)) > 0:
+                    await asyncio.sleep(pause_s)  # this client's next message waits for the next token
         finally:
             self._drop(client)
         return socket
 
-    def _on_message(self, client: _Client, text: str) -> None:
-        """A subscription or a change; a refused one is answered with an error message, the socket stays."""
+    def _on_message(self, client: _Client, text: str) -> float:
+        """A subscription or a change; a refused one is answered with an error message, the socket stays.
+        The seconds to wait before reading the client's next message (a twist over the rate: until the
+        body's next token)."""
         try:
             data = _parse_json(text)
             if not isinstance(data, dict):
                 raise ControlError(400, "expected a JSON object with \"op\" or \"subscribe\"")
             if "subscribe" in data:
                 self._subscribe(client, data)
-                return
+                return 0.0
             body = dict(data)
             op, name = body.pop("op", None), body.pop("name", None)
+            if op == "twist" and (refused := self.twists.refusal(name)) is not None:
+                client.offer(_error_message(refused[0]))
+                return refused[1]
             self.session.request(op, name, body)
         except ControlError as error:
             client.offer(_error_message(error))
+        return 0.0
 
     def _subscribe(self, client: _Client, data: dict) -> None:
         names = data["subscribe"]

@@ -116,12 +116,14 @@ def assert_close_to(pose: dict, expected: np.ndarray, where: str) -> None:
 class Api:
     """The control API of a daemon on `rescue-live` with a ManualClock, over real HTTP and WebSocket."""
 
-    def __init__(self, log: Path | None = None) -> None:
+    def __init__(self, log: Path | None = None, rate_clock=None) -> None:
         self.scene = load_scene(SCENE)
         self.clock = ManualClock()
         self.daemon = Daemon(self.scene, clock=self.clock, workers=0)
         self.session = LiveSession(self.daemon, EventWriter(log) if log is not None else None)
-        self.server = ControlServer(self.session, ControlAddress("127.0.0.1", 0))
+        # the twist rate limit on an injected clock (the simulated one unless told): commands here come
+        # back to back in wall time, each at its own simulated instant
+        self.server = ControlServer(self.session, ControlAddress("127.0.0.1", 0), rate_clock=rate_clock or self.clock.now)
         self.http: aiohttp.ClientSession | None = None
         self.url = ""
 

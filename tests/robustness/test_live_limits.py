@@ -10,6 +10,7 @@ one line, exit 2, by every command that reads one.
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 import socket
@@ -17,14 +18,18 @@ import subprocess
 import time
 import urllib.error
 import urllib.request
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+import aiohttp
 import numpy as np
 import pytest
 
 from emulator.bench.serve_process import ServeProcess, serve_command
+from emulator.control.twist_rate import TWIST_BURST, TWIST_RATE_HZ
 from emulator.scene import load_scene
 from emulator.scene.loader import MAX_BODY_SPEED_M_S, MAX_DENSITY, MAX_PARTICLES_ALIVE
+from tests.robustness.conftest import SCALE
 
 MD_UNLIMITED = b"MD0044072501000\n"
 URG_PERIOD_S = 0.1
@@ -194,3 +199,76 @@ def test_an_event_log_over_a_limit_is_refused_at_load(tmp_path: Path) -> None:
         errors = result.stderr.strip().splitlines()
         assert result.returncode == 2 and len(errors) == 1, (name, result.stderr[-2000:])
         assert "session.jsonl: line 2" in errors[0] and "particle budget" in errors[0], (name, errors[0])
+
+
+def test_a_twist_flood_is_held_to_the_rate_and_another_clients_scans_stay_on_time() -> None:
+    """rescue-live's robot driven by a WebSocket client sending twists as fast as it can and an HTTP client
+    doing the same (each applied twist costs the loop 0.3–1.5 ms, more pushing into a wall; unpaced,
+    40 000 refused WebSocket messages a second took a core and the URG fell silent for 0.9 s): beyond the
+    per-body rate they are refused (429, an error message naming the limit), no second of simulated time
+    gets more twists than the rate plus the burst, and the URG's MD stream, another client's, keeps coming."""
+    twist = {"vx": 1.0, "wz": 0.0}  # at the body's max_speed: soon pushing into a wall
+    flood_s = 3.0 * SCALE
+
+    async def websocket(url: str, errors: list[dict]) -> int:
+        """Twists at up to 5 kHz (40 times the rate), reading the answers meanwhile; at the end the close
+        handshake is not waited for (the daemon reads what is still queued on its own pace)."""
+        sent = 0
+        close = aiohttp.ClientWSTimeout(ws_close=0.5)
+        async with aiohttp.ClientSession() as http, http.ws_connect(url + "/api/ws", timeout=close) as ws:
+            async def read() -> None:
+                async for message in ws:
+                    data = json.loads(message.data)
+                    if data["type"] == "error":
+                        errors.append(data)
+
+            reader = asyncio.create_task(read())
+            end = time.monotonic() + flood_s
+            while time.monotonic() < end:
+                await ws.send_json({"op": "twist", "name": "robot", **twist})
+                sent += 1
+                if sent % 50 == 0:
+                    await asyncio.sleep(0.01)  # and let the reader keep up
+            reader.cancel()
+        return sent
+
+    async def put(url: str, refusals: list[dict]) -> int:
+        """Twists over HTTP, one after another on a keep-alive connection."""
+        sent = 0
+        async with aiohttp.ClientSession() as http:
+            end = time.monotonic() + flood_s
+            while time.monotonic() < end:
+                async with http.put(url + "/api/bodies/robot/twist", json=twist) as answer:
+                    sent += 1
+                    if answer.status == 429:
+                        refusals.append(await answer.json())
+                    else:
+                        assert answer.status == 200, await answer.text()
+        return sent
+
+    with ServeProcess("rescue-live", ["urg=tcp:127.0.0.1:0"]) as served:
+        url = served.control_url
+        stream = UrgStream(served.endpoint("urg", "tcp").address)
+        errors: list[dict] = []
+        refusals: list[dict] = []
+        try:
+            stream.read_for(1.0)
+            with ThreadPoolExecutor(2) as clients:  # each flooding client on its own thread and loop
+                sent = [clients.submit(asyncio.run, websocket(url, errors)), clients.submit(asyncio.run, put(url, refusals))]
+                during = stream.read_for(flood_s)
+                ws_sent, put_sent = (future.result() for future in sent)
+        finally:
+            stream.close()
+        with urllib.request.urlopen(url + "/api/events", timeout=10) as answer:
+            stamps = np.array([event["t"] for event in json.loads(answer.read()) if event["op"] == "twist"])
+    load = os.getloadavg()[0]
+    assert refusals and errors, (len(refusals), len(errors))
+    for refusal in [*refusals[:3], *errors[:3]]:
+        assert refusal["key"] == "bodies[robot].twist", refusal
+        assert f"more than {TWIST_RATE_HZ:g} twist commands a second" in refusal["error"], refusal
+    assert ws_sent + put_sent > 2 * len(stamps), (ws_sent, put_sent, len(stamps))  # the flood outran the rate
+    busiest = int((np.searchsorted(stamps, stamps + 1.0) - np.arange(len(stamps))).max())  # in any 1 s of the clock
+    assert busiest <= TWIST_RATE_HZ + TWIST_BURST, busiest
+    expected = flood_s / URG_PERIOD_S
+    assert len(during) >= 0.7 * expected, f"{len(during)} scans of {expected:.0f} (load average {load:.1f})"
+    assert longest_gap_s(during) < 1.0, f"the sensor went silent for {longest_gap_s(during):.2f} s (load average {load:.1f})"

@@ -1,0 +1,106 @@
+"""Twist commands held to a rate per live body (control/twist_rate.py): a token bucket on an injected
+clock, refusing with a 429 (HTTP) or an error message (WebSocket) that names the limit, before any work."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from test_twist import Api, run
+
+from emulator.control.twist_rate import TWIST_BURST, TWIST_RATE_HZ, TokenBucket, TwistRate
+
+
+class Tick:
+    """A wall clock the test moves."""
+
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_a_bucket_takes_its_burst_then_its_rate_and_a_clock_going_back_adds_nothing() -> None:
+    bucket = TokenBucket(rate_hz=100.0, burst=5, now=0.0)
+    assert [bucket.take(0.0) for _ in range(7)] == [True] * 5 + [False] * 2
+    assert bucket.take(0.005) is False  # half a token
+    assert bucket.take(0.010) is True and bucket.take(0.010) is False
+    assert bucket.take(-50.0) is False  # back in time: no refill
+    assert [bucket.take(10.0) for _ in range(6)] == [True] * 5 + [False]  # a long pause refills to the burst only
+    taken = sum(bucket.take(10.0 + k / 1000) for k in range(1, 1001))  # 1 kHz for 1 s: the rate gets through
+    assert taken == 100
+
+
+def test_a_100_hz_bridge_with_jitter_always_passes_and_200_hz_is_held_to_the_rate() -> None:
+    clock = Tick()
+    limit = TwistRate(["robot"], clock)
+    jitter = [0.004, 0.016, 0.0, 0.02, 0.01] * 400  # 100 Hz on average, in pairs and gaps, for 20 s
+    for gap in jitter:
+        clock.now += gap
+        assert limit.refusal("robot") is None
+    refused = 0
+    for _ in range(4000):  # then 200 Hz for 20 s
+        clock.now += 0.005
+        if (refusal := limit.refusal("robot")) is not None:
+            refused += 1
+            error, wait_s = refusal
+            assert error.status == 429 and error.key == "bodies[robot].twist"
+            assert f"more than {TWIST_RATE_HZ:g} twist commands a second" in error.message
+            assert 0.0 < wait_s <= 1.0 / TWIST_RATE_HZ
+    assert 4000 - refused == pytest.approx(20 * TWIST_RATE_HZ + TWIST_BURST, abs=2)
+
+
+def test_a_refusal_says_when_the_next_token_is_due() -> None:
+    clock = Tick()
+    limit = TwistRate(["robot"], clock, rate_hz=100.0, burst=1)
+    assert limit.refusal("robot") is None
+    clock.now += 0.004
+    _, wait_s = limit.refusal("robot")
+    assert wait_s == pytest.approx(0.006)
+    clock.now += wait_s
+    assert limit.refusal("robot") is None
+
+
+def test_names_that_are_not_live_bodies_pass_and_make_no_bucket() -> None:
+    clock = Tick()
+    limit = TwistRate(["robot"], clock)
+    for k in range(10_000):
+        assert limit.refusal(f"nobody{k}") is None  # the change answers 404 itself
+        assert limit.refusal(None) is None
+    assert list(limit._buckets) == ["robot"]
+
+
+def test_the_api_refuses_a_flood_per_body_over_http_and_websocket_and_changes_nothing() -> None:
+    clock = Tick()
+
+    async def flood() -> tuple[list[int], dict, list[dict], int, int]:
+        async with Api(rate_clock=clock) as api:
+            api.clock._now = 1.0
+            statuses, refusal = [], {}
+            for _ in range(TWIST_BURST + 10):  # all at one wall instant
+                status, answer = await api.call("PUT", "/api/bodies/robot/twist", {"vx": 0.2})
+                statuses.append(status)
+                if status == 429:
+                    refusal = answer
+            applied = len(api.session.events)
+            async with api.http.ws_connect(api.url + "/api/ws") as ws:
+                assert json.loads((await ws.receive(timeout=5)).data)["type"] == "state"
+                await ws.send_json({"op": "twist", "name": "robot", "vx": 0.2})
+                errors = [json.loads((await ws.receive(timeout=5)).data)]
+                clock.now += 0.1  # 12.5 tokens back
+                for _ in range(12):
+                    await ws.send_json({"op": "twist", "name": "robot", "vx": 0.2})
+                await ws.send_json({"op": "twist", "name": "robot", "vx": 0.2})
+                while len(errors) < 2:
+                    message = json.loads((await ws.receive(timeout=5)).data)
+                    if message["type"] == "error":
+                        errors.append(message)
+            return statuses, refusal, errors, applied, len(api.session.events)
+
+    statuses, refusal, errors, applied, after = run(flood())
+    assert statuses == [200] * TWIST_BURST + [429] * 10
+    assert refusal["key"] == "bodies[robot].twist" and "refused, nothing changed" in refusal["error"]
+    assert applied == TWIST_BURST  # the refused ones are not in the log
+    assert [error["status"] for error in errors] == [429, 429] and errors[0]["key"] == "bodies[robot].twist"
+    assert after == TWIST_BURST + 12  # the 12 the refill allowed, not the 13th
