@@ -99,3 +99,17 @@ def test_uniforms_cover_the_unit_interval_evenly():
     expected = len(draws) / 20
     chi_squared = ((counts - expected) ** 2 / expected).sum()
     assert chi_squared < 45.0  # 19 degrees of freedom: p ≈ 0.0007
+
+
+def test_a_hundred_thousand_live_particles_draw_their_offsets_once():
+    # 10 000 particles/s for 10 s: about 98 blocks of offsets alive at once; each instant after the first
+    # must find them all kept (a smaller cache drew every block again, at every instant)
+    from emulator.scene.plumes import _offset_block
+
+    p = plume(rate=10_000.0, lifetime=10.0)
+    first = particles_at(p, 7, 0, 30.0)
+    before = _offset_block.cache_info().misses
+    again = particles_at(p, 7, 0, 30.05)
+    assert _offset_block.cache_info().misses - before <= 1  # at most the block of the newest births
+    shared = np.intersect1d(first.index, again.index)
+    assert len(shared) > 99_000
