@@ -30,7 +30,7 @@ and starts them again, so no scan computed ahead of a change is served after it.
 from __future__ import annotations
 
 import asyncio
-import dataclasses
+import copy
 import math
 from collections import OrderedDict, deque
 from concurrent.futures import Executor, Future
@@ -56,11 +56,19 @@ STRIDE_TOLERANCE_S = 1e-6
 PREFETCH_LEAD_S = 0.07
 # A behind stream is foreseen every m-th scan, m at most this (a sensor then sends one scan in 32).
 MAX_SPACING = 32
-# A spaced stream's batch spans at most this many strides per scan of a batch, so a spacing chosen once soon gives way to a newer one.
-MAX_BATCH_SPAN_STRIDES_PER_SCAN = 4
-# A stream's demand lapses this long (wall) after its last scan, or three spaced strides (its device
-# stopping the stream withdraws it at once).
-DEMAND_VALID_S = 2.0
+# A spaced stream's batch spans at most this many strides per scan of a batch: a full batch (which shares
+# its numpy passes) up to a spacing of 16. A batch foreseen at a smaller spacing than the workers need by
+# the time one takes it is thinned then (`_thinned`), so a long span does not keep a spacing chosen before
+# the cost was known. (At 4, a worker given 0.3-0.5 of a core spaced the streams 6-9 and computed jobs
+# of 1.2-2.3 instants, each instant at 1.5x the cost of one in a full batch.)
+MAX_BATCH_SPAN_STRIDES_PER_SCAN = 16
+# A batch is thinned only if the spacing the workers need has grown this much since it was foreseen.
+THIN_AT_SPACING_RATIO = 1.5
+# A stream's demand lapses this long (wall) after its last scan, or four spaced strides at the spacing
+# it had or the workers now need, whichever is longer (its device stopping the stream withdraws it at
+# once): a stream waiting for its batch behind a long queue still counts (a fleet starting at 7x
+# what its workers compute lost half its demand within 2 s, and was spaced too little).
+DEMAND_VALID_S = 3.0
 
 
 class ScanSource(Protocol):
@@ -141,8 +149,9 @@ class ScanCache:
         self._last_request = request
         shape, tick = _request_key(request), round(time_s * TICKS_PER_S)
         future = self._futures.get(_cache_key(time_s, request))
-        fresher = None if _ready(future) or self._now is None else self._freshest_ready(shape, tick)
-        if fresher is None and not _ready(future) and self._now is not None and self._behind():
+        ready = _ready(future)  # (each look at a future takes its lock: once)
+        fresher = None if ready or self._now is None else self._freshest_ready(shape, tick)
+        if fresher is None and not ready and self._now is not None and self._behind():
             fresher = self._newest_ready(shape, tick)  # a request read at once (`input_scan`): the newest there is
         if fresher is not None:  # behind: the freshest scan not yet sent, with its own time (not the one asked)
             self._follow_stream(time_s, request)
@@ -160,7 +169,7 @@ class ScanCache:
             raise
         scan_tick = round(scan.time_s * TICKS_PER_S)
         if scan_tick == tick and scan.time_s != time_s:
-            scan = dataclasses.replace(scan, time_s=time_s)
+            scan = _with_time(scan, time_s)
         if scan_tick != self._observed_tick:  # several endpoints of one sensor: count and tell once
             self._observed_tick = scan_tick
             self._count_served(shape, scan_tick, late=scan_tick < tick)
@@ -188,7 +197,7 @@ class ScanCache:
         always gets the scan it asked for)."""
         served = self._served_tick.get(shape, -1)
         ready = [(key[0], future) for key, future in self._futures.items()
-                 if key[1:] == shape and served < key[0] <= tick and _ready(future)]
+                 if served < key[0] <= tick and key[1:] == shape and _ready(future)]
         return max(ready, key=lambda pair: pair[0])[1] if ready else None
 
     def next_scan(self, time_s: float) -> tuple[Future | None, float | None]:
@@ -204,21 +213,29 @@ class ScanCache:
         now = self._now() if self._now is not None else None
         limit = tick if now is None else max(tick, round(now * TICKS_PER_S))  # a poll reads the newest due
         served = self._served_tick.get(shape, -1)
-        held = sorted(((key[0], future) for key, future in self._futures.items()
-                       if key[1:] == shape and key[0] > served and not future.cancelled()), key=lambda pair: pair[0])
-        due = [(held_tick, future) for held_tick, future in held if held_tick <= limit]
+        # Scans not sent yet, due by `limit` or later. Called on every scan: the ticks are compared first,
+        # and only the scans due are checked (each check takes a future's lock), the later ones if needed.
+        due: list[tuple[int, Future]] = []
+        later: list[tuple[int, Future]] = []
+        for key, future in self._futures.items():
+            held_tick = key[0]
+            if held_tick > served and key[1:] == shape:
+                (due if held_tick <= limit else later).append((held_tick, future))
+        due = [(held_tick, future) for held_tick, future in due if not future.cancelled()]
         if any(future.done() for _, future in due):
             return None, None
         if due:
-            self._start_now(due[0][1])
-            return due[0][1], None
+            first = min(due, key=_tick_of)[1]
+            self._start_now(first)
+            return first, None
         outdated = self._outdated.get(_cache_key(time_s, request))
         if outdated is not None and not outdated.done():
             return outdated, None  # a live change dropped it: started again once its old job ends
-        if held and self._behind():  # a spaced stream's next scan: the revolutions between are skipped
-            later_tick, later = held[0]
-            self._start_now(later)
-            return (None if later.done() else later), later_tick / TICKS_PER_S
+        if later and self._behind():  # a spaced stream's next scan: the revolutions between are skipped
+            for later_tick, future in sorted(later, key=_tick_of):
+                if not future.cancelled():
+                    self._start_now(future)
+                    return (None if future.done() else future), later_tick / TICKS_PER_S
         return self._future(self._current(time_s, shape), request, foreseen=True), None
 
     def input_scan(self, time_s: float) -> Future | None:
@@ -253,6 +270,13 @@ class ScanCache:
         """Whether the workers cannot compute every scan of every stream (streams are spaced): a
         revolution between a spaced stream's scans is then skipped, not computed alone."""
         return getattr(self._executor, "spacing", 1.0) > 1.0
+
+    def _job_cost_s(self, instants: int) -> float:
+        """Wall seconds a worker takes lately for a job of `instants` (0 if the executor cannot tell)."""
+        job_cost_s = getattr(self._executor, "job_cost_s", None)
+        if job_cost_s is not None:
+            return job_cost_s(instants) or 0.0
+        return instants * (getattr(self._executor, "instant_cost_s", None) or 0.0)
 
     def _idle(self) -> bool:
         """Whether a scan asked for now is computed at once (a free worker, nothing waiting)."""
@@ -425,8 +449,8 @@ class ScanCache:
             kept = [entry for entry in kept if entry[1][0] > served]
             stride = self._strides.get(shape)
             if now is not None:
-                # due by the time the job is done (each instant takes a worker about `instant_cost_s`)
-                done_by = now + len(kept) * (getattr(self._executor, "instant_cost_s", None) or 0.0) * self._speed()
+                # due by the time the job is done (what a job of as many instants takes a worker lately)
+                done_by = now + self._job_cost_s(len(kept)) * self._speed()
                 due = [entry for entry in kept if entry[0] <= done_by]
                 kept = [entry for entry in kept if entry[0] > done_by]
                 if due:
@@ -435,12 +459,29 @@ class ScanCache:
                         time_s, rebound = time_s + math.floor((now - time_s) / stride + 1e-9) * stride, True
                     if not rebound or round(time_s * TICKS_PER_S) > self._bound_tick.get(shape, -1):
                         kept.insert(0, (time_s, key, part))
+            if stride is not None and len(kept) > 1:
+                kept = self._thinned(kept, stride)
             if kept:
                 self._bound_tick[shape] = max(self._bound_tick.get(shape, -1), round(kept[-1][0] * TICKS_PER_S))
         for _, _, part in entries:
             if all(part is not kept_part for _, _, kept_part in kept):
                 self.dropped += part.cancel()
         return [(time_s, part) for time_s, _, part in kept]
+
+    def _thinned(self, kept: list[tuple[float, tuple, Future]], stride: float) -> list[tuple[float, tuple, Future]]:
+        """A batch foreseen at a smaller spacing than the workers need now (a fleet starting, or
+        the machine giving them less of its cores) computes only every m-th scan of it: the others
+        would be skipped by the device (it sends the freshest) at the cost of what the stream needs."""
+        spacing = min(MAX_SPACING, getattr(self._executor, "spacing", 1.0))
+        foreseen_at = (kept[-1][0] - kept[0][0]) / ((len(kept) - 1) * stride)  # the batch's own spacing
+        if spacing < THIN_AT_SPACING_RATIO * foreseen_at:
+            return kept  # the spacing's ordinary swings: the batch stays whole
+        gap = (spacing - 1.0) * stride - STRIDE_TOLERANCE_S  # a batch at spacing m has gaps of ⌊m⌋ or ⌈m⌉ strides
+        thinned = [kept[0]]
+        for entry in kept[1:]:
+            if entry[0] - thinned[-1][0] >= gap:
+                thinned.append(entry)
+        return thinned
 
     def _forget(self, future: Future) -> None:
         for key in [key for key, stored in self._futures.items() if stored is future]:
@@ -500,8 +541,8 @@ class ScanCache:
         for every stream (1 with a thread, or while they keep up). The stream states its demand."""
         demand = getattr(self._executor, "demand", None)
         if demand is not None:  # stated again at the stream's next scan, or it lapses (its client left)
-            spacing = self._spacing.get(shape, 1.0)
-            demand((id(self), shape), self._speed() / stride, max(DEMAND_VALID_S, 3.0 * spacing * stride / self._speed()))
+            spacing = max(self._spacing.get(shape, 1.0), getattr(self._executor, "spacing", 1.0))
+            demand((id(self), shape), self._speed() / stride, max(DEMAND_VALID_S, 4.0 * spacing * stride / self._speed()))
         spacing = self._spacing[shape] = min(MAX_SPACING, getattr(self._executor, "spacing", 1.0))
         return spacing
 
@@ -575,7 +616,21 @@ class ScanCache:
 
 
 def _request_key(request: dict[str, Any]) -> RequestKey:
+    if not request:  # a URG's: several lookups a scan
+        return ()
     return tuple(sorted(request.items()))
+
+
+def _tick_of(pair: tuple[int, Future]) -> int:
+    return pair[0]
+
+
+def _with_time(scan: Scan, time_s: float) -> Scan:
+    """The scan with the device's own float for its instant (the same µs tick): a shallow copy, as
+    `dataclasses.replace` makes, at a fraction of its cost (it ran on every scan of a batch)."""
+    copied = copy.copy(scan)
+    object.__setattr__(copied, "time_s", time_s)
+    return copied
 
 
 def _cache_key(time_s: float, request: dict[str, Any]) -> tuple:

@@ -16,7 +16,8 @@ The protocol on the pipe, parent → worker: `("scan", job, sensor, time_s, requ
 `("scans", job, sensor, times_s, request)`, `("apply", job, events)` (world changes,
 records of `scene.live.event_record`, applied at their simulated instants: live control) and
 `("stop",)`; worker → parent: `("ready", pid)` once its world is built, then
-`("done", job, result)` or `("failed", job, message)`.
+`("done", job, result, cpu_s)` or `("failed", job, message, cpu_s)`, `cpu_s` the worker's CPU time
+since its previous answer (what the job cost it, whatever share of a core the machine gave it).
 
 A worker that dies (killed, out of memory) is restarted with the same scene,
 sensors and applied events, and the jobs it held are sent again (a scan is a
@@ -115,6 +116,7 @@ def _worker_main(
     gc.freeze()  # the world lives as long as the worker: a full collection need not walk it (50-80 ms)
     os.nice(nice)
     connection.send(("ready", multiprocessing.current_process().pid))
+    cpu_mark = time.process_time()
     while True:
         try:
             message = connection.recv()
@@ -137,9 +139,12 @@ def _worker_main(
             else:
                 raise ValueError(f"unknown worker message {kind!r}")
         except Exception as error:  # the daemon gets it as the job's exception
-            connection.send(("failed", job, f"{type(error).__name__}: {error}"))
+            answer: tuple = ("failed", job, f"{type(error).__name__}: {error}")
         else:
-            connection.send(("done", job, result))
+            answer = ("done", job, result)
+        cpu_now = time.process_time()
+        connection.send((*answer, cpu_now - cpu_mark))
+        cpu_mark = cpu_now
 
 
 # numpy's BLAS starts a thread per core and keeps it spinning after each call: a worker (already one
@@ -274,13 +279,17 @@ class WorkerPool:
 
     @property
     def spacing(self) -> float:
-        """Every how many scans each stream is computed so that the workers keep up (`Scheduler.spacing`)."""
-        with self._lock:
-            return self._scheduler.spacing
+        """Every how many scans each stream is computed so that the workers keep up (`Scheduler.spacing`;
+        a lookup, read on every scan handed out)."""
+        return self._scheduler.spacing
 
     @property
     def instant_cost_s(self) -> float | None:
         return self._scheduler.instant_cost_s
+
+    def job_cost_s(self, instants: int) -> float | None:
+        """Wall seconds a job of `instants` takes a worker lately (`Scheduler.job_cost_s`)."""
+        return self._scheduler.job_cost_s(instants)
 
     @property
     def waiting(self) -> int:
@@ -380,7 +389,7 @@ class WorkerPool:
         """Settle the worker's jobs as results arrive; on EOF the worker died: restart it."""
         while True:
             try:
-                kind, job_id, result = connection.recv()
+                kind, job_id, result, *cpu = connection.recv()
             except (EOFError, OSError):
                 break
             with self._lock:
@@ -390,7 +399,7 @@ class WorkerPool:
                     self.jobs_computed += 1
                     self.instants_computed += instants
                     done = time.monotonic()  # its worker's time on it: from when it was sent or the job before came back
-                    self._scheduler.computed(instants, done - max(job.sent_at, worker.last_done))
+                    self._scheduler.computed(instants, done - max(job.sent_at, worker.last_done), cpu[0] if cpu else None)
                     worker.last_done = done
                 self._dispatch()  # this worker may be free: its next job goes out before this one is settled
             if job is None or job.future.cancelled():
@@ -503,6 +512,9 @@ class WorkerExecutor(Executor):
         """What an instant costs a worker lately (wall s; read without the pool's lock: a job's
         preparation asks for it while the pool holds it)."""
         return self._pool.instant_cost_s
+
+    def job_cost_s(self, instants: int) -> float | None:
+        return self._pool.job_cost_s(instants)
 
     def demand(self, stream: Any, per_second: float, valid_s: float) -> None:
         self._pool.demand(stream, per_second, valid_s)
