@@ -86,18 +86,34 @@ def md_unlimited(hokuyo: str) -> bytes:
 
 
 
-def fleet_scene_text(count: int, lms_count: int = 0, hokuyo: str = URG_MODEL) -> str:
+# The dense-plume fleet: railway's plume (8 puffs a second, each living 10 s, density 0.05) with puffs of
+# 0.4 m instead of 0.35, and the URGs 1.5 m ahead of the robot, inside the haze and 1.1 m before the
+# burning debris, so every scan crosses the plume: 40 URG-04LX on two workers, under `physical`.
+DENSE_PLUME_FLEET = 40
+DENSE_PLUME_WORKERS = 2
+DENSE_PLUME_SIZE = 0.4
+DENSE_PLUME_SENSOR_X = 1.5
+
+
+def fleet_scene_text(count: int, lms_count: int = 0, hokuyo: str = URG_MODEL, *, dense_plume: bool = False) -> str:
     """railway's world with `count` Hokuyos of model `hokuyo` (URG-04LX: urg00, urg01, ...; others named
-    by `sensor_name`) side by side, and `lms_count` LMS200 (lms00, ...) at 500 kBd, each on a free TCP port."""
+    by `sensor_name`) side by side, and `lms_count` LMS200 (lms00, ...) at 500 kBd, each on a free TCP port.
+    `dense_plume`: the plume's puffs DENSE_PLUME_SIZE and the Hokuyos inside the haze (DENSE_PLUME_SENSOR_X)."""
     railway = next(bundled for bundled in bundled_scenes() if bundled.name == "railway")
     text = Path(railway.path).read_text()
     world = text[: text.index("[[sensors]]")]
+    x = 0.25
+    if dense_plume:
+        plume = world.index("[[smoke.plumes]]")
+        size = world.index("size = 0.35", plume)
+        world = world[:size] + f"size = {DENSE_PLUME_SIZE}" + world[size + len("size = 0.35"):]
+        x = DENSE_PLUME_SENSOR_X
     sensors = []
     for index in range(count):
         y = -0.6 + 1.2 * index / max(1, count - 1)
         sensors.append(
             f'[[sensors]]\nname = "{sensor_name(hokuyo, index)}"\nmodel = "{hokuyo}"\n'
-            f'position = [0.25, {y:.4f}, 0.3]\nendpoints = ["tcp:127.0.0.1:0"]\n'
+            f'position = [{x}, {y:.4f}, 0.3]\nendpoints = ["tcp:127.0.0.1:0"]\n'
         )
     for index in range(lms_count):
         y = -0.6 + 1.2 * index / max(1, lms_count - 1)
@@ -241,13 +257,14 @@ class _LmsStream:
 
 def measure_serve(
     count: int, duration_s: float, workers: int | None = None, model: str = "physical", lms_count: int = 0,
-    hokuyo: str = URG_MODEL,
+    hokuyo: str = URG_MODEL, dense_plume: bool = False,
 ) -> dict:
     """Start `serve` with `count` Hokuyos of model `hokuyo` (and `lms_count` LMS200 at 500 kBd) under
-    preset `model`, stream them all to as many clients, measure `duration_s`."""
+    preset `model`, stream them all to as many clients, measure `duration_s` (`dense_plume`: the
+    Hokuyos inside railway's plume, `fleet_scene_text`)."""
     with tempfile.TemporaryDirectory(prefix="lrf-bench-serve-") as folder:
         scene = Path(folder) / f"{hokuyo}-x{count}-lms-x{lms_count}.toml"
-        scene.write_text(fleet_scene_text(count, lms_count, hokuyo))
+        scene.write_text(fleet_scene_text(count, lms_count, hokuyo, dense_plume=dense_plume))
         names = [sensor_name(hokuyo, index) for index in range(count)] + [lms_name(index) for index in range(lms_count)]
         endpoints = [f"{name}=tcp:127.0.0.1:0" for name in names]
         extra = ["--model", model, *(["--workers", str(workers)] if workers is not None else [])]
@@ -255,7 +272,7 @@ def measure_serve(
             streams = _stream_all(daemon, count, lms_count, duration_s, hokuyo=hokuyo)
             load = os.getloadavg()
     period_s = HOKUYO_MODELS[hokuyo].period_s
-    return {"model": model, "hokuyo": hokuyo, **_figures(count, lms_count, duration_s, workers, streams, load, period_s)}
+    return {"model": model, "hokuyo": hokuyo, "dense_plume": dense_plume, **_figures(count, lms_count, duration_s, workers, streams, load, period_s)}
 
 
 def _stream_all(
@@ -366,8 +383,9 @@ def table_lines(rows: list[dict]) -> list[str]:
         f" {'late p99':>8} {'max ms':>7} {'CPU ms/scan':>11} {'of it loop':>10} {'cores':>6}  load avg",
     ]
     for row in rows:
+        sensor = row.get("hokuyo", URG_MODEL) + ("+plume" if row.get("dense_plume") else "")
         lines.append(
-            f"  {row['model']:<11} {row['sensors']:>3} {row.get('hokuyo', URG_MODEL):<9} {row['workers']!s:>7} {row['rate']:>7.1%} {row['on_time']:>8.2%}"
+            f"  {row['model']:<11} {row['sensors']:>3} {sensor:<9} {row['workers']!s:>7} {row['rate']:>7.1%} {row['on_time']:>8.2%}"
             f" {row['jitter_p50_ms']:>10.2f} {row['jitter_p99_ms']:>7.2f} {row['lateness_p99_ms']:>8.2f}"
             f" {row['lateness_max_ms']:>7.1f} {row['cpu_ms_per_scan']:>11.2f} {row['daemon_cpu_ms_per_scan']:>10.2f}"
             f" {row['cpu_cores']:>6.2f}"
@@ -474,7 +492,8 @@ def utm_lines(row: dict) -> list[str]:
 def bench_section(quick: bool) -> tuple[dict, list[str]]:
     """`lrf-emulator bench --section serve`: N = 1, 10, 40 URGs under `physical`, 8 UST-10LX (40 Hz) under
     `formsma2011` and under `physical`, then the moonshot (100 URGs + 20 LMS200 under `formsma2011`; not in
-    a quick run: its start-up alone takes ~10 s), rescue's UTM-30LX-EW streaming ME under `physical` over
+    a quick run: its start-up alone takes ~10 s), the dense-plume fleet (40 URGs inside railway's plume,
+    two workers), rescue's UTM-30LX-EW streaming ME under `physical` over
     its slowest instant (40 s; quick: 10 s), then the capacity curve (`capacity.py`). Quick: 5 s each, else 30 s."""
     duration = 5.0 if quick else 30.0
     rows = [measure_serve(count, duration) for count in (1, 10, 40)]
@@ -483,6 +502,8 @@ def bench_section(quick: bool) -> tuple[dict, list[str]]:
     if not quick:
         urgs, lms, model = MOONSHOT
         rows.append(measure_serve(urgs, duration, model=model, lms_count=lms))
+    # the dense-plume fleet (URGs inside railway's plume, two workers): whether it fits on 2 cores
+    rows.append(measure_serve(DENSE_PLUME_FLEET, duration, workers=DENSE_PLUME_WORKERS, dense_plume=True))
     from emulator.bench.capacity import bench_curves  # the fleet past what its worker computes
 
     utm = measure_utm_stream(duration_s=10.0 if quick else UTM_WINDOW_S)

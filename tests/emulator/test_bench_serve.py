@@ -20,6 +20,22 @@ def test_the_generated_scene_has_n_urgs_on_free_tcp_ports(tmp_path) -> None:
     assert scene.plumes == load_scene("railway").plumes
 
 
+def test_the_dense_plume_fleet_stands_inside_the_haze_with_larger_puffs(tmp_path) -> None:
+    import dataclasses
+
+    path = tmp_path / "plume.toml"
+    path.write_text(fleet_scene_text(4, dense_plume=True))
+    scene, railway = load_scene(path), load_scene("railway")
+    (plume,), (original,) = scene.plumes, railway.plumes
+    assert plume.size == 0.4 and original.size == 0.35
+    assert dataclasses.replace(plume, size=original.size) == original  # only the puffs' size differs
+    haze = next(region for region in scene.regions if region.name == "haze")
+    low = [c - s / 2 for c, s in zip(haze.pose.position, haze.shape.size)]
+    high = [c + s / 2 for c, s in zip(haze.pose.position, haze.shape.size)]
+    for spec in scene.sensors:
+        assert all(lo < value < hi for lo, value, hi in zip(low, spec.pose.position, high)), spec.pose
+
+
 def test_cpu_is_read_from_the_process_accounting() -> None:
     before = cpu_seconds(os.getpid())
     sum(range(3_000_000))
