@@ -379,13 +379,13 @@ def table_lines(rows: list[dict]) -> list[str]:
     lines = [
         "serve: a real daemon streaming N Hokuyos (railway's world) to N TCP clients; one run each, no best-of;"
         f" on time = within {ON_TIME_MS:g} ms of its slot; CPU = daemon + workers (/proc/PID/stat)",
-        f"  {'model':<11} {'N':>3} {'sensor':<9} {'workers':>7} {'rate':>7} {'on time':>8} {'jitter p50':>10} {'p99 ms':>7}"
+        f"  {'model':<11} {'N':>3} {'sensor':<14} {'workers':>7} {'rate':>7} {'on time':>8} {'jitter p50':>10} {'p99 ms':>7}"
         f" {'late p99':>8} {'max ms':>7} {'CPU ms/scan':>11} {'of it loop':>10} {'cores':>6}  load avg",
     ]
     for row in rows:
         sensor = row.get("hokuyo", URG_MODEL) + ("+plume" if row.get("dense_plume") else "")
         lines.append(
-            f"  {row['model']:<11} {row['sensors']:>3} {sensor:<9} {row['workers']!s:>7} {row['rate']:>7.1%} {row['on_time']:>8.2%}"
+            f"  {row['model']:<11} {row['sensors']:>3} {sensor:<14} {row['workers']!s:>7} {row['rate']:>7.1%} {row['on_time']:>8.2%}"
             f" {row['jitter_p50_ms']:>10.2f} {row['jitter_p99_ms']:>7.2f} {row['lateness_p99_ms']:>8.2f}"
             f" {row['lateness_max_ms']:>7.1f} {row['cpu_ms_per_scan']:>11.2f} {row['daemon_cpu_ms_per_scan']:>10.2f}"
             f" {row['cpu_cores']:>6.2f}"
