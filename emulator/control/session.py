@@ -4,11 +4,13 @@ Every front end (HTTP, WebSocket, `serve --events-in`) hands its changes to
 `LiveSession.request` or `apply`; the session stamps them with the simulated
 instant they take effect, applies them to the daemon (world, scan caches,
 clock), appends them to the event log (and `--events FILE`), and tells its
-listeners (the WebSocket clients' state messages).
+listeners (the WebSocket clients' state messages). In memory it keeps the
+last `EVENTS_SHOWN` events (`GET /api/events`); the file keeps them all.
 """
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import math
 from pathlib import Path
@@ -24,6 +26,8 @@ from emulator.scene.model import Pose, Scene
 
 Listener = Callable[[LiveEvent], None]
 
+EVENTS_SHOWN = 10_000  # the last events applied, kept for `GET /api/events` (the --events file keeps every one)
+
 
 class LiveSession:
     """Live changes to `daemon`, logged; `writer` (serve --events) gets each one as it is applied."""
@@ -31,7 +35,8 @@ class LiveSession:
     def __init__(self, daemon: Daemon, writer: EventWriter | None = None) -> None:
         self.daemon = daemon
         self.scene: Scene = daemon.scene
-        self.events: list[LiveEvent] = []
+        self.events: collections.deque[LiveEvent] = collections.deque(maxlen=EVENTS_SHOWN)
+        self.applied = 0  # events applied in all
         self.limits = LiveLimits(self.scene)  # the scene file's limits, for every change in turn
         self._writer = writer
         self._listeners: list[Listener] = []
@@ -57,7 +62,10 @@ class LiveSession:
         except ValueError as error:
             raise ControlError(409, str(error), f"bodies[{event.name}]") from None
         self.events.append(event)
+        self.applied += 1
         record(self.limits, event)
+        if self.daemon.live is not None:
+            self.limits.particles.prune(self.daemon.live.horizon)
         if self._writer is not None:
             self._writer.write(event)
         for listener in list(self._listeners):

@@ -45,7 +45,7 @@ from emulator.daemon.scan_cache import (
 from emulator.daemon.workers import WORKER_NICE, ScanJobFailed, WorkerPool
 from emulator.errors import UserError
 from emulator.optics import World
-from emulator.scene.live import ClockChange, LiveEvent, LiveState, event_record
+from emulator.scene.live import ClockChange, LiveEvent, LiveState, event_record, live_horizon
 from emulator.scene.endpoints import Address, PtyAddress, Rfc2217Address, plan_endpoints
 from emulator.scene.model import Scene, SensorSpec
 from emulator.scene.sick_models import MODELS as SICK_MODELS
@@ -503,7 +503,9 @@ class Daemon:
             return self._sensor_factory or simulated_sensors(self.scene, self.world), self._scan_thread
         names = [spec.name for spec, _ in self._plan]
         count = min(self._workers, len(names)) or 1
-        self.pool = WorkerPool(self.scene, names, count, nice=self._worker_nice)
+        live = self.live
+        self.pool = WorkerPool(self.scene, names, count, nice=self._worker_nice,
+                               live_state=live.export if live is not None else None)
         self.pool.start()
         if self._before_workers:  # changes applied before the workers existed (serve --events-in)
             self.pool.apply([event_record(event) for event in self._before_workers])
@@ -582,8 +584,13 @@ class Daemon:
         if self.live is None:
             raise UserError("this daemon serves recorded scans: its world cannot change")
         event = self.live.apply(event)
+        # no scan is computed before the horizon any more: forget the history only it needed (here and in workers)
+        # (never past the event itself: a log replayed in order keeps every change it still needs)
+        horizon = min(live_horizon(self.clock.now(), self.clock.speed), event.time_s)
+        self.live.prune(horizon)
         if self.pool is not None:
-            self.pool.apply([event_record(event)])  # queued before the scans submitted below
+            # `gen`: a restarted worker given the state with this event in it already skips it
+            self.pool.apply([{**event_record(event), "gen": self.live.generation}, {"op": "prune", "t": horizon}])  # queued before the scans submitted below
         elif self.world is None:
             self._before_workers.append(event)
         for scans in self.scan_caches.values():

@@ -14,7 +14,9 @@ it is sent, so it leaves out the instants no device can still send by then
 
 The protocol on the pipe, parent → worker: `("scan", job, sensor, time_s, request)`,
 `("scans", job, sensor, times_s, request)`, `("apply", job, events)` (world changes,
-records of `scene.live.event_record`, applied at their simulated instants: live control) and
+records of `scene.live.event_record`, applied at their simulated instants: live control; and
+`{"op": "prune", "t"}`, the daemon's horizon: `LiveState.prune`; `{"op": "restore", "state"}`, a
+`LiveState.export` a restarted worker starts from, the events after it carrying their `gen`) and
 `("stop",)`; worker → parent: `("ready", pid)` once its world is built, then
 `("done", job, result, cpu_s)` or `("failed", job, message, cpu_s)`, `cpu_s` the worker's CPU time
 since its previous answer (what the job cost it, whatever share of a core the machine gave it).
@@ -81,7 +83,12 @@ def apply_events(world: Any, scene: Scene, events: Sequence[dict]) -> None:
     """Apply world-change events (records of `scene.live.event_record`) to a worker's world,
     as the daemon applied them: the worker's scans then match the daemon's world."""
     for record in events:
-        world.apply(event_from_record(record))
+        if record["op"] == "prune":  # the daemon's horizon moved on: forget what only earlier instants needed
+            world.live.prune(record["t"])
+        elif record["op"] == "restore":  # a restarted worker: the daemon's live state as it was then
+            world.live.restore(record["state"])
+        elif record.get("gen", float("inf")) > world.live.generation:  # not in a state restored already
+            world.apply(event_from_record(record))
 
 
 @dataclass(frozen=True)
@@ -213,6 +220,7 @@ class WorkerPool:
         *,
         on_restart: Callable[[str], None] = lambda line: print(line, file=sys.stderr, flush=True),
         nice: int = WORKER_NICE,
+        live_state: Callable[[], dict] | None = None,
     ) -> None:
         if not 0 <= nice <= 19:
             raise ValueError(f"a worker's nice increment must be 0..19, got {nice}")
@@ -222,7 +230,10 @@ class WorkerPool:
         self._sensor_names = tuple(sensor_names)
         self._workers = [_Worker(index, self._sensor_names) for index in range(max(1, count))]
         self._scheduler = Scheduler(len(self._workers))
-        self._events: list[dict] = []  # every event applied so far: a restarted worker replays them
+        # what a restarted worker starts from: the daemon's live state (`LiveState.export`, bounded by its
+        # horizon) when given, else every event applied so far, replayed
+        self._live_state = live_state
+        self._events: list[dict] = []
         self._job_ids = itertools.count()
         self._lock = threading.Lock()
         self._on_restart = on_restart
@@ -313,7 +324,8 @@ class WorkerPool:
         events = [dict(event) for event in events]
         futures = []
         with self._lock:
-            self._events += events
+            if self._live_state is None:
+                self._events += events
             for worker in self._workers:
                 job = next(self._job_ids)
                 futures.append(Future())
@@ -443,10 +455,11 @@ class WorkerPool:
             # settles the held `apply` jobs when it is done
             held_applies = [job for job in worker.jobs.values() if job.message[0] == "apply"]
             worker.jobs = {job_id: job for job_id, job in worker.jobs.items() if job.message[0] != "apply"}
-            if self._events:
+            replayed = [{"op": "restore", "state": self._live_state()}] if self._live_state is not None else list(self._events)
+            if replayed:
                 job = next(self._job_ids)
                 replay = Future()
-                worker.jobs[job] = _Job(("apply", job, list(self._events)), replay, attempts=0)
+                worker.jobs[job] = _Job(("apply", job, replayed), replay, attempts=0)
                 replay.add_done_callback(lambda done: _settle_like(done, [held.future for held in held_applies]))
                 self._send(worker, job)
             for job_id in list(worker.jobs):

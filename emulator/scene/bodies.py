@@ -21,7 +21,9 @@ one vectorised pass (no per-beam Python).
   moved along its twist's closed-form arc (scene/drive.py) for the time
   elapsed, up to `until_s`; the body's scene pose before the first. Evaluating
   instant t never looks at events after t, so replaying the same event log
-  gives the same scans.
+  gives the same scans. Nor does it look at events before the one holding at
+  t (each event carries its pose): `BodyPoses.prune(horizon)` forgets those
+  before the one holding at the horizon, and instants before it are refused.
 
 Quaternions are (x, y, z, w) as in TUM files; rotations compose as
 R = Rz(yaw) · Ry(pitch) · Rx(roll), as `Pose.rotation_matrix`.
@@ -356,6 +358,26 @@ class _EventLog:
                 self._arrays[name][self._count] = value
             self._count += 1
 
+    def prune(self, horizon_s: float) -> None:
+        """Forget the events before the one holding at `horizon_s`, once they are half of those held
+        (amortised O(1) per event; earlier snapshots keep the old arrays)."""
+        with self._lock:
+            count = int(np.searchsorted(self._arrays["times"][: self._count], horizon_s, side="right")) - 1
+            if count <= 0 or 2 * count < self._count:
+                return
+            kept = self._count - count
+            size = max(16, 2 * kept)
+            self._arrays = {name: np.concatenate([array[count:self._count], np.zeros((size - kept, *array.shape[1:]))])
+                            for name, array in self._arrays.items()}
+            self._count = kept
+
+    def restore(self, events: LiveEvents) -> None:
+        """Hold `events` in place of what was held."""
+        with self._lock:
+            self._count = len(events.times)
+            self._arrays = {name: np.concatenate([getattr(events, name), np.zeros((max(16, self._count), *shape))])
+                            for name, shape in self._COLUMNS.items()}
+
     def snapshot(self) -> LiveEvents:
         with self._lock:
             n = self._count
@@ -370,6 +392,7 @@ class BodyPoses:
     _live: dict[str, _EventLog] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        self.horizon = float("-inf")  # instants before it are no longer kept (`prune`)
         self._by_name = {body.name: body for body in self.bodies}
         self._live = {body.name: _EventLog() for body in self.bodies if isinstance(body.trajectory, Live)}
 
@@ -387,6 +410,8 @@ class BodyPoses:
         if isinstance(body.trajectory, Keyframes):
             return keyframe_frames(body.trajectory, times)
         if isinstance(body.trajectory, Live):
+            if len(times) and times.min() < self.horizon:
+                raise ValueError(f"body {name!r} at {times.min()} s: before the kept history's horizon ({self.horizon} s)")
             return live_frames(self._live[name].snapshot(), body.pose, times)
         return Frames(
             np.broadcast_to(np.asarray(body.pose.position, dtype=float), (len(times), 3)),
@@ -421,6 +446,18 @@ class BodyPoses:
         if name not in self._live:
             raise KeyError(f"no live body named {name!r} (live: {', '.join(self._live) or 'none'})")
         return self._live[name]
+
+    def prune(self, horizon_s: float) -> None:
+        """Forget the live events no instant at or after `horizon_s` depends on (module docstring)."""
+        self.horizon = max(self.horizon, horizon_s)
+        for log in self._live.values():
+            log.prune(horizon_s)
+
+    def restore(self, events: dict[str, LiveEvents], horizon_s: float) -> None:
+        """Hold each live body's `events` (from `live_events`) in place of its own, and the horizon."""
+        self.horizon = horizon_s
+        for name, held in events.items():
+            self._live_log(name).restore(held)
 
     def live_events(self, name: str) -> LiveEvents:
         """The events recorded for live body `name` so far."""

@@ -19,6 +19,17 @@ change stamped before that item's later changes (a log replayed ahead, then a
 change made by hand) replaces them, as a density change drops the scene's
 keyframes after it; live poses only move forward.
 
+Only what can still matter is kept in memory. The daemon computes no instant
+before its horizon (`LIVE_KEEP_S` simulated seconds before now, longer at a
+fast clock: daemon/service.py); `prune(horizon)` then drops each item's
+events superseded before the horizon (keeping the one holding at it), a
+plume's changes whose particles have all died by then (their emission state
+carried on, so particle indices and cadence stay the same), and a live
+body's events before the one holding at it. Every instant at or after the
+horizon evaluates bit for bit as without pruning; an instant before it, or a
+change stamped before it, is a ValueError. The event log file keeps every
+event (control/events.py).
+
 `event_record` / `event_from_record` turn events into plain dicts and back,
 for the event log and for worker processes (daemon/workers.py), which apply
 the same events to their own worlds.
@@ -111,6 +122,15 @@ LiveEvent = Union[RegionChange, PlumeChange, PoseChange, TwistChange, ClockChang
 WorldEvent = Union[RegionChange, PlumeChange, PoseChange, TwistChange]
 
 
+LIVE_KEEP_S = 60.0  # simulated seconds of live history kept before now (x the clock's speed when faster)
+
+
+def live_horizon(now_s: float, speed: float = 1.0) -> float:
+    """The earliest instant the daemon may still compute at `now_s`: `LIVE_KEEP_S` simulated seconds
+    before now, or that many wall seconds at a clock faster than real time."""
+    return now_s - LIVE_KEEP_S * max(1.0, speed)
+
+
 @dataclass
 class _Track:
     """One item's events, ascending in time: parallel lists so `bisect` finds the one holding at t."""
@@ -131,6 +151,27 @@ class _Track:
         position = bisect.bisect_right(self.times, time_s)
         return self.events[position - 1] if position else None
 
+    def drop_before(self, count: int) -> None:
+        """Forget the first `count` events."""
+        if count > 0:
+            del self.times[:count], self.events[:count]
+
+    def superseded(self, time_s: float) -> int:
+        """How many leading events are superseded at `time_s` (all before the one holding then)."""
+        return max(bisect.bisect_right(self.times, time_s) - 1, 0)
+
+
+@dataclass(frozen=True)
+class _Emission:
+    """A plume's emission state where its kept changes begin (those before were pruned): what is
+    emitting then (None: the scene's schedule), rate, wind, the next particle index, the last birth."""
+
+    emitting: bool | None
+    rate: float
+    wind: Vec3
+    next_index: int
+    last_birth: float | None
+
 
 class LiveState:
     """The live events applied to one scene, and what they make of it at any instant.
@@ -146,13 +187,28 @@ class LiveState:
         self.bodies = bodies if bodies is not None else BodyPoses(scene.bodies)
         self.generation = 0
         self._lock = threading.Lock()
+        self._changing = threading.RLock()  # a whole apply or prune: `export` sees none half done
         self._regions = {region.name: _Track() for region in scene.regions}
         self._plumes = {plume.name: _Track() for plume in scene.plumes}
         self._segments: dict[str, tuple[EmissionSegment, ...] | None] = {plume.name: None for plume in scene.plumes}
+        self._carried: dict[str, _Emission | None] = {plume.name: None for plume in scene.plumes}
+        # per plume, for a change appended after the others: the segments before its last change, the
+        # state then, and that change (so appending recomputes two changes' parts, not all of them)
+        self._before_last: dict[str, tuple[list[EmissionSegment], _Emission, PlumeChange] | None] = {
+            plume.name: None for plume in scene.plumes}
+        self._plume_by_name = {plume.name: plume for plume in scene.plumes}
+        self.horizon = float("-inf")  # no instant before it is kept (`prune`)
 
     def apply(self, event: WorldEvent) -> WorldEvent:
         """Take `event` into account from its instant on (validated by the caller: names exist); the
-        event as applied (a twist resolved). ValueError for a pose or twist stamped before the body's last one."""
+        event as applied (a twist resolved). ValueError for a pose or twist stamped before the body's last one,
+        or any change stamped before the horizon (`prune`)."""
+        with self._changing:
+            return self._apply(event)
+
+    def _apply(self, event: WorldEvent) -> WorldEvent:
+        if event.time_s < self.horizon:
+            raise ValueError(f"live {event.op} at {event.time_s} s is before the kept history's horizon ({self.horizon} s)")
         if isinstance(event, (PoseChange, TwistChange)):
             if isinstance(event, PoseChange):
                 self.bodies.add_live_pose(event.name, event.time_s, event.pose)
@@ -168,12 +224,81 @@ class LiveState:
             elif isinstance(event, PlumeChange):
                 track = self._plumes[event.name]
                 track.add(event.time_s, event)
-                plume = next(plume for plume in self.scene.plumes if plume.name == event.name)
-                self._segments[event.name] = emission_segments(plume, track.events)
+                plume = self._plume_by_name[event.name]
+                self._segments[event.name] = self._emission_after(plume, track)
             else:
                 raise TypeError(f"not a world event: {event!r}")
             self.generation += 1
         return event
+
+    def _emission_after(self, plume: Plume, track: _Track) -> tuple[EmissionSegment, ...]:
+        """The plume's segments once `track`'s last change was added (lock held): from the last change's
+        part on when it was appended after the one before, else from the first kept change."""
+        name, events, before = plume.name, track.events, self._before_last[plume.name]
+        if before is not None and len(events) >= 2 and events[-2] is before[2]:
+            prefix, state, last = before
+            parts, state = _emission(plume, [last], state, events[-1].time_s)
+            prefix.extend(parts)
+        else:
+            prefix_parts, state = _emission(plume, events[:-1], self._carried[name], events[-1].time_s)
+            prefix = list(prefix_parts)
+        self._before_last[name] = (prefix, state, events[-1])
+        return (*prefix, *_emission(plume, events[-1:], state, float("inf"))[0])
+
+    def prune(self, horizon_s: float) -> None:
+        """Forget what no instant at or after `horizon_s` depends on (module docstring); later changes
+        must be stamped at or after it. Amortised: an item's history is cut once half of it is droppable."""
+        with self._changing:
+            self._prune(horizon_s)
+
+    def export(self) -> dict[str, Any]:
+        """What this state holds, picklable (a restarted worker `restore`s it rather than replaying every change)."""
+        with self._changing, self._lock:
+            return {
+                "generation": self.generation, "horizon": self.horizon,
+                "regions": {name: list(track.events) for name, track in self._regions.items()},
+                "plumes": {name: (list(track.events), self._carried[name], self._segments[name]) for name, track in self._plumes.items()},
+                "bodies": {name: self.bodies.live_events(name) for name in self.bodies.live_names},
+            }
+
+    def restore(self, exported: dict[str, Any]) -> None:
+        """Hold what `export` gave (another state of the same scene), in place of what this one held."""
+        with self._changing, self._lock:
+            self.generation, self.horizon = exported["generation"], exported["horizon"]
+            for name, events in exported["regions"].items():
+                self._regions[name] = _Track([event.time_s for event in events], list(events))
+            for name, (events, carried, segments) in exported["plumes"].items():
+                self._plumes[name] = _Track([event.time_s for event in events], list(events))
+                self._carried[name], self._segments[name], self._before_last[name] = carried, segments, None
+            self.bodies.restore(exported["bodies"], exported["horizon"])
+
+    def _prune(self, horizon_s: float) -> None:
+        with self._lock:
+            if horizon_s <= self.horizon:
+                return
+            self.horizon = horizon_s
+            for track in self._regions.values():
+                count = track.superseded(horizon_s)
+                if count and 2 * count >= len(track.times):
+                    track.drop_before(count)
+            for name, track in self._plumes.items():
+                plume = self._plume_by_name[name]
+                # a change's particles are born before the next change and all dead `lifetime` after it
+                dead_by = horizon_s - plume.lifetime
+                count = track.superseded(dead_by)
+                if count and 2 * count >= len(track.times):
+                    _, self._carried[name] = _emission(plume, track.events[:count], self._carried[name], track.times[count])
+                    track.drop_before(count)
+                    self._before_last[name] = None  # rebuilt from the kept changes at the next one
+                    segments = self._segments[name]
+                    self._segments[name] = tuple(s for s in segments or () if s.end + plume.lifetime > horizon_s)
+        self.bodies.prune(horizon_s)
+
+    def held(self) -> int:
+        """How many live events are held in memory (regions, plumes and live bodies)."""
+        with self._lock:
+            count = sum(len(track.times) for track in (*self._regions.values(), *self._plumes.values()))
+        return count + sum(len(self.bodies.live_events(name).times) for name in self.bodies.live_names)
 
     def resolved(self, event: TwistChange) -> TwistChange:
         """The twist with the instant it stops: its watchdog, or the first contact with a solid before.
@@ -219,11 +344,15 @@ class LiveState:
 
     def plume_state(self, name: str, time_s: float) -> dict:
         """What plume `name` emits at `time_s`: {"emitting", "rate", "wind"} (for the control API's state)."""
-        plume = next(plume for plume in self.scene.plumes if plume.name == name)
+        plume = self._plume_by_name[name]
+        if time_s < self.horizon:
+            raise ValueError(f"plume state at {time_s} s is before the kept history's horizon ({self.horizon} s)")
         with self._lock:
-            segments = self._segments[name] or (scene_emission(plume),)
+            segments = self._segments[name]
+            segments = (scene_emission(plume),) if segments is None else segments
             changes = [event for event in self._plumes[name].events if event.time_s <= time_s]
-        rate, wind = plume.rate, plume.wind
+            carried = self._carried[name]
+        rate, wind = (plume.rate, plume.wind) if carried is None else (carried.rate, carried.wind)
         for change in changes:
             rate = change.rate if change.rate is not None else rate
             wind = change.wind if change.wind is not None else wind
@@ -235,7 +364,9 @@ class LiveState:
         return self.bodies.frames(name, [time_s]).at(0)
 
 
-def emission_segments(plume: Plume, changes: list[PlumeChange]) -> tuple[EmissionSegment, ...]:
+def emission_segments(
+    plume: Plume, changes: list[PlumeChange], carried: _Emission | None = None
+) -> tuple[EmissionSegment, ...]:
     """The plume's emission split at each change, each part with the rate and wind then in force.
 
     Before the first change the scene's schedule holds (births from `start`,
@@ -243,15 +374,29 @@ def emission_segments(plume: Plume, changes: list[PlumeChange]) -> tuple[Emissio
     its instant on. A part that starts while the plume was emitting continues
     its cadence (the next birth one new interval after the last one, not
     before the change), so changing only the wind adds no extra particle.
+    `carried`: the state where `changes` begin when earlier ones were pruned
+    (`LiveState.prune`): then no part comes before the first change.
     """
+    return _emission(plume, changes, carried, float("inf"))[0]
+
+
+def _emission(
+    plume: Plume, changes: list[PlumeChange], carried: _Emission | None, last_end: float
+) -> tuple[tuple[EmissionSegment, ...], _Emission]:
+    """`emission_segments` with the last change's part ending at `last_end`, and the state after it."""
     segments: list[EmissionSegment] = []
-    emitting: bool | None = None  # None: the scene's start/stop schedule
-    rate, wind = plume.rate, plume.wind
-    boundaries = [change.time_s for change in changes[1:]] + [float("inf")]
+    if carried is None:
+        emitting: bool | None = None  # None: the scene's start/stop schedule
+        rate, wind, next_index, last_birth = plume.rate, plume.wind, 0, None
+        starts: list[PlumeChange | None] = [None, *changes]
+        ends = [change.time_s for change in changes] + [last_end]
+    else:
+        emitting, rate, wind, next_index, last_birth = (
+            carried.emitting, carried.rate, carried.wind, carried.next_index, carried.last_birth)
+        starts = list(changes)
+        ends = [change.time_s for change in changes[1:]] + [last_end]
     begin = float("-inf")
-    next_index = 0
-    last_birth: float | None = None
-    for change, end in zip([None, *changes], [changes[0].time_s if changes else float("inf"), *boundaries]):
+    for change, end in zip(starts, ends):
         if change is not None:
             begin = change.time_s
             emitting = change.emitting if change.emitting is not None else emitting
@@ -277,7 +422,7 @@ def emission_segments(plume: Plume, changes: list[PlumeChange]) -> tuple[Emissio
             segments.append(segment)
         else:
             last_birth = None
-    return tuple(segments)
+    return tuple(segments), _Emission(emitting, rate, wind, next_index, last_birth)
 
 
 def event_record(event: LiveEvent) -> dict[str, Any]:

@@ -49,6 +49,13 @@ class _Rates:
         return self.lifetime * max(rates[first:])
 
 
+    def prune(self, horizon_s: float) -> None:
+        """Forget the rates no change at or after `horizon_s` looks at (those superseded `lifetime` before it)."""
+        count = bisect.bisect_right(self.times, horizon_s - self.lifetime) - 1
+        if count > 0 and 2 * count >= len(self.times):
+            del self.times[:count], self.rates[:count]
+
+
 class ParticleBudget:
     """Each plume's rate history, and the particles alive at once it allows from an instant on."""
 
@@ -77,6 +84,12 @@ class ParticleBudget:
         """Plume `name` emits at `rate` from `time_s` on."""
         rates = self._plumes[name]
         rates.times, rates.rates = rates.with_change(time_s, rate)
+
+
+    def prune(self, horizon_s: float) -> None:
+        """Forget what no change stamped at or after `horizon_s` is checked against."""
+        for rates in self._plumes.values():
+            rates.prune(horizon_s)
 
 
 class LiveLimits:
