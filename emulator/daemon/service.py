@@ -75,6 +75,7 @@ DEVICE_OPTIONS: dict[str, tuple[str, ...]] = {
 _COLA_UNITS: weakref.WeakKeyDictionary[Any, ColaUnit] = weakref.WeakKeyDictionary()
 
 
+PRUNE_STEP_S = 1.0  # the live history is pruned when the horizon has moved on this far (simulated s)
 OVERLOAD_CHECK_S = 1.0  # how often (wall) the daemon looks whether its sensors fell behind or caught up
 MAX_HELD_INPUT_BYTES = 65536  # client input waiting for a scan; beyond, it is discarded (counted)
 RETRY_AFTER_FAILURE_S = 0.1  # a device whose scan failed is polled again this much later (wall)
@@ -586,11 +587,15 @@ class Daemon:
         event = self.live.apply(event)
         # no scan is computed before the horizon any more: forget the history only it needed (here and in workers)
         # (never past the event itself: a log replayed in order keeps every change it still needs)
+        # (moved on once a simulated second at most: a 100 Hz stream pays for it once in 100 changes)
         horizon = min(live_horizon(self.clock.now(), self.clock.speed), event.time_s)
-        self.live.prune(horizon)
+        prune = horizon >= self.live.horizon + PRUNE_STEP_S
+        if prune:
+            self.live.prune(horizon)
         if self.pool is not None:
             # `gen`: a restarted worker given the state with this event in it already skips it
-            self.pool.apply([{**event_record(event), "gen": self.live.generation}, {"op": "prune", "t": horizon}])  # queued before the scans submitted below
+            records = [{**event_record(event), "gen": self.live.generation}]
+            self.pool.apply(records + [{"op": "prune", "t": horizon}] if prune else records)  # queued before the scans submitted below
         elif self.world is None:
             self._before_workers.append(event)
         for scans in self.scan_caches.values():
