@@ -33,6 +33,14 @@ window holds the sensor's slowest instant (UTM_SLOWEST_AT_S, from
 `bench --section scans`), and each scan's gap to the previous is measured
 against the 25 ms period (target: every one within 5 %, 1.25 ms).
 
+The floor rows (`measure_serve_floor`, `measure_utm_floor`) are bare
+timerfd-woken senders (`scip_floor`) of the same message sizes, periods and
+revolution phases, read by the same client: what the machine itself allows
+at the moment, to read the daemon's rows against (as `bench --section cola`
+does). The daemon's rows carry its own counters over the window (SIGUSR1
+stats): scans it waited for or sent late, and its timer wake-ups more than
+1, 2, 5 ms late.
+
 Every figure is from one run (no best-of-N); the machine's load average is
 reported beside it, as the clients share the machine with the daemon.
 """
@@ -45,6 +53,7 @@ import os
 import selectors
 import socket
 import struct
+import subprocess
 import sys
 import tempfile
 import termios
@@ -269,14 +278,79 @@ def measure_serve(
         endpoints = [f"{name}=tcp:127.0.0.1:0" for name in names]
         extra = ["--model", model, *(["--workers", str(workers)] if workers is not None else [])]
         with ServeProcess(scene, endpoints, extra_args=extra, timeout_s=300.0) as daemon:
-            streams = _stream_all(daemon, count, lms_count, duration_s, hokuyo=hokuyo)
+            counters: list[dict[str, int]] = []
+            streams = _stream_all(daemon, count, lms_count, duration_s, hokuyo=hokuyo,
+                                  on_window=lambda: counters.append(daemon.stats()))
             load = os.getloadavg()
     period_s = HOKUYO_MODELS[hokuyo].period_s
-    return {"model": model, "hokuyo": hokuyo, "dense_plume": dense_plume, **_figures(count, lms_count, duration_s, workers, streams, load, period_s)}
+    return {"model": model, "hokuyo": hokuyo, "dense_plume": dense_plume,
+            **_figures(count, lms_count, duration_s, workers, streams, load, period_s), **daemon_counters(*counters)}
+
+
+# The daemon's own counters over a window (SIGUSR1 stats; service.Daemon.stats): scans a device had to wait for
+# (`scan_waits`), scans sent late or skipped (the workers behind), its loop's timer wake-ups and those more
+# than 1, 2, 5 ms late.
+DAEMON_COUNTERS = ("scan_waits", "late", "skipped", "wakes", "late_1ms", "late_2ms", "late_5ms")
+
+
+def daemon_counters(*counters: dict[str, int]) -> dict[str, int]:
+    """The change of DAEMON_COUNTERS between the first and the last of `counters` (none: {})."""
+    if len(counters) < 2:
+        return {}
+    return {f"daemon_{key}": counters[-1][key] - counters[0][key] for key in DAEMON_COUNTERS if key in counters[0]}
+
+
+class FloorProcess:
+    """`scip_floor` as a child process: bare SCIP senders, one per spec, `endpoint(name).address` as a
+    ServeProcess's (so the same clients read them) and `pid` (its CPU, as a daemon's)."""
+
+    def __init__(self, specs: list[str]) -> None:
+        self.process = subprocess.Popen([sys.executable, "-m", "emulator.bench.scip_floor", *specs],
+                                        stdout=subprocess.PIPE, text=True)
+        self.pid = self.process.pid
+        self._ports: dict[str, int] = {}
+        for _ in specs:
+            _, name, port = self.process.stdout.readline().split()  # type: ignore[union-attr]
+            self._ports[name] = int(port)
+
+    def endpoint(self, name: str) -> _FloorEndpoint:
+        return _FloorEndpoint(("127.0.0.1", self._ports[name]))
+
+    def __enter__(self) -> FloorProcess:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.process.terminate()
+        self.process.wait(10)
+
+
+@dataclass(frozen=True)
+class _FloorEndpoint:
+    address: tuple[str, int]
+
+
+def floor_spec(name: str, hokuyo: str, phase_ms: int, chars: int = 3) -> str:
+    """A `scip_floor` stream of model `hokuyo`'s period, its measured steps at `chars` a step (MD: 3, ME: 6)."""
+    model = HOKUYO_MODELS[hokuyo]
+    steps = model.last_valid_step - model.first_valid_step + 1
+    return f"{name}:{model.period_s * 1000:g}:{phase_ms}:{steps}:{chars}"
+
+
+def measure_serve_floor(count: int, duration_s: float, hokuyo: str = URG_MODEL) -> dict:
+    """The floor under `measure_serve(count, …, hokuyo=hokuyo)`: bare timerfd senders (`scip_floor`) of
+    the same MD message sizes, period and revolution phases (the i-th of n turns i × period / n behind
+    the first, as `revolution_phase_ms`), read by the same client."""
+    model = HOKUYO_MODELS[hokuyo]
+    period_ms = int(round(model.period_s * 1000))
+    specs = [floor_spec(sensor_name(hokuyo, index), hokuyo, index * period_ms // count) for index in range(count)]
+    with FloorProcess(specs) as floor:
+        streams = _stream_all(floor, count, 0, duration_s, hokuyo=hokuyo)  # type: ignore[arg-type]
+        load = os.getloadavg()
+    return {"model": "floor", "hokuyo": hokuyo, **_figures(count, 0, duration_s, 0, streams, load, model.period_s)}
 
 
 def _stream_all(
-    daemon: ServeProcess, count: int, lms_count: int, duration_s: float, on_window: Callable[[], None] | None = None,
+    daemon: ServeProcess | FloorProcess, count: int, lms_count: int, duration_s: float, on_window: Callable[[], None] | None = None,
     hokuyo: str = URG_MODEL,
 ) -> tuple[list[_Stream], list[_LmsStream], tuple[float, float]]:
     """Stream from every sensor; `on_window` is called as the measuring window opens and closes."""
@@ -377,7 +451,8 @@ def _figures(
 
 def table_lines(rows: list[dict]) -> list[str]:
     lines = [
-        "serve: a real daemon streaming N Hokuyos (railway's world) to N TCP clients; one run each, no best-of;"
+        "serve: a real daemon streaming N Hokuyos (railway's world) to N TCP clients (floor: bare timerfd senders of the"
+        " same message sizes, periods and phases); one run each, no best-of;"
         f" on time = within {ON_TIME_MS:g} ms of its slot; CPU = daemon + workers (/proc/PID/stat)",
         f"  {'model':<11} {'N':>3} {'sensor':<14} {'workers':>7} {'rate':>7} {'on time':>8} {'jitter p50':>10} {'p99 ms':>7}"
         f" {'late p99':>8} {'max ms':>7} {'CPU ms/scan':>11} {'of it loop':>10} {'cores':>6}  load avg",
@@ -391,6 +466,8 @@ def table_lines(rows: list[dict]) -> list[str]:
             f" {row['cpu_cores']:>6.2f}"
             f"  {' '.join(f'{value:g}' for value in row['load_average'])}"
         )
+        if "daemon_wakes" in row:
+            lines.append(f"  {'':<11} the daemon: {_counter_text(row)}")
         if row.get("lms_sensors"):
             lines.append(
                 f"  {'':<11} + {row['lms_sensors']} LMS200 at {LMS_BAUD // 1000} kBd: rate {row['lms_rate']:.1%},"
@@ -434,32 +511,15 @@ def measure_utm_stream(
     epoch = time.time() - max(0.0, window_from_s - WARM_UP_S - UTM_START_UP_S)
     extra = ["--model", model, "--sensors", UTM_SENSOR, "--epoch", f"{epoch:.6f}"]
     with ServeProcess(scene_path, [f"{UTM_SENSOR}=tcp:127.0.0.1:0"], extra_args=extra, timeout_s=300.0) as daemon:
-        sock = socket.create_connection(daemon.endpoint(UTM_SENSOR).address, timeout=5)
-        stream = _Stream(sock)
-        sock.sendall(me_unlimited(hokuyo))
-        sock.setblocking(False)
-        selector = selectors.DefaultSelector()
-        selector.register(sock, selectors.EVENT_READ, stream)
-        realtime_to_monotonic = time.time() - time.monotonic()
-        measure_from = math.inf  # WARM_UP_S after its first scan, and not before the window's simulated start
-        give_up = time.monotonic() + FIRST_SCAN_TIMEOUT_S
-        try:
-            while (now := time.monotonic()) < measure_from + duration_s:
-                if measure_from == math.inf and stream.arrivals:
-                    measure_from = now + max(WARM_UP_S, window_from_s - (time.time() - epoch))
-                elif measure_from == math.inf and now > give_up:
-                    raise RuntimeError(f"{UTM_SENSOR} sent no scan within {FIRST_SCAN_TIMEOUT_S:g} s")
-                if stream.arrivals and stream.arrivals[0] < measure_from <= now:
-                    stream.forget()  # the window starts here: forget the warm-up
-                for _ in selector.select(timeout=0.05):
-                    stream.receive(realtime_to_monotonic)
-        finally:
-            selector.close()
-            sock.close()
+        counters: list[dict[str, int]] = []
+        # the window opens WARM_UP_S after the first scan, and not before its simulated start
+        arrivals, measure_from, read_late = _stream_one(
+            daemon.endpoint(UTM_SENSOR).address, me_unlimited(hokuyo), duration_s,
+            lambda now: now + max(WARM_UP_S, window_from_s - (time.time() - epoch)),
+            on_window=lambda: counters.append(daemon.stats()),
+        )
         load = os.getloadavg()
-    arrivals = [arrival for arrival in stream.arrivals if arrival >= measure_from]
-    gaps = np.diff(arrivals) if len(arrivals) > 1 else np.array([np.nan])
-    deviation = np.abs(gaps - period_s) / period_s
+    realtime_to_monotonic = time.time() - time.monotonic()
     window_sim = (measure_from + realtime_to_monotonic - epoch, measure_from + duration_s + realtime_to_monotonic - epoch)
     return {
         "scene": UTM_SCENE,
@@ -468,37 +528,115 @@ def measure_utm_stream(
         "duration_s": duration_s,
         "window_sim_s": [round(window_sim[0], 1), round(window_sim[1], 1)],
         "slowest_at_s": slowest_at_s,
+        **_gap_figures(arrivals, duration_s, period_s),
+        "read_late": read_late,
+        **daemon_counters(*counters),
+        "load_average": [round(value, 2) for value in load],
+    }
+
+
+def measure_utm_floor(duration_s: float = UTM_WINDOW_S) -> dict:
+    """The UTM row's floor: a bare timerfd sender (`scip_floor`) of the same ME message size and period,
+    read by the same client for `duration_s` after WARM_UP_S."""
+    scene_path = Path(next(bundled for bundled in bundled_scenes() if bundled.name == UTM_SCENE).path)
+    hokuyo = next(spec.model for spec in load_scene(scene_path).sensors if spec.name == UTM_SENSOR)
+    model = HOKUYO_MODELS[hokuyo]
+    with FloorProcess([floor_spec(UTM_SENSOR, hokuyo, 0, chars=6)]) as floor:
+        arrivals, _, read_late = _stream_one(
+            floor.endpoint(UTM_SENSOR).address, me_unlimited(hokuyo), duration_s, lambda now: now + WARM_UP_S
+        )
+        load = os.getloadavg()
+    return {"hokuyo": hokuyo, "duration_s": duration_s, **_gap_figures(arrivals, duration_s, model.period_s),
+            "read_late": read_late,
+            "load_average": [round(value, 2) for value in load]}
+
+
+def _stream_one(
+    address: tuple[str, int], command: bytes, duration_s: float, window_from: Callable[[float], float],
+    on_window: Callable[[], None] | None = None,
+) -> tuple[list[float], float, int]:
+    """One stream asked with `command`: its scans' arrivals from `window_from(now at its first scan)` for
+    `duration_s` (kernel receive stamps, as the fleet rows), that start (monotonic s) and the reads made
+    a period late; `on_window` is called as the window opens and as it closes."""
+    sock = socket.create_connection(address, timeout=5)
+    stream = _Stream(sock)
+    sock.sendall(command)
+    sock.setblocking(False)
+    selector = selectors.DefaultSelector()
+    selector.register(sock, selectors.EVENT_READ, stream)
+    realtime_to_monotonic = time.time() - time.monotonic()
+    measure_from, opened = math.inf, False
+    give_up = time.monotonic() + FIRST_SCAN_TIMEOUT_S
+    try:
+        while (now := time.monotonic()) < measure_from + duration_s:
+            if measure_from == math.inf and stream.arrivals:
+                measure_from = window_from(now)
+            elif measure_from == math.inf and now > give_up:
+                raise RuntimeError(f"no scan within {FIRST_SCAN_TIMEOUT_S:g} s")
+            if not opened and measure_from <= now:
+                opened = True
+                stream.forget()  # the window starts here: forget the warm-up
+                if on_window is not None:
+                    on_window()
+            for _ in selector.select(timeout=0.05):
+                stream.receive(realtime_to_monotonic)
+        if on_window is not None:
+            on_window()
+    finally:
+        selector.close()
+        sock.close()
+    return [arrival for arrival in stream.arrivals if arrival >= measure_from], measure_from, stream.read_late
+
+
+def _gap_figures(arrivals: list[float], duration_s: float, period_s: float) -> dict:
+    """Each scan's gap to the previous against the period: the share within UTM_TOLERANCE, deviation percentiles."""
+    gaps = np.diff(arrivals) if len(arrivals) > 1 else np.array([np.nan])
+    deviation = np.abs(gaps - period_s) / period_s
+    return {
         "scans_received": len(arrivals),
         "rate": len(arrivals) / (duration_s / period_s),
         "within_5pct": float(np.mean(deviation <= UTM_TOLERANCE)),
         "gap_deviation_p50_ms": float(np.percentile(deviation, 50)) * period_s * 1000.0,
         "gap_deviation_p99_ms": float(np.percentile(deviation, 99)) * period_s * 1000.0,
         "gap_deviation_max_ms": float(np.max(deviation)) * period_s * 1000.0,
-        "read_late": stream.read_late,
-        "load_average": [round(value, 2) for value in load],
     }
 
 
-def utm_lines(row: dict) -> list[str]:
-    return [
+def utm_lines(row: dict, floor: dict | None = None) -> list[str]:
+    def gaps(row: dict) -> str:
+        return (f"rate {row['rate']:.1%}, gaps within {UTM_TOLERANCE:.0%} of the period {row['within_5pct']:.2%},"
+                f" deviation p50 {row['gap_deviation_p50_ms']:.2f} / p99 {row['gap_deviation_p99_ms']:.2f}"
+                f" / max {row['gap_deviation_max_ms']:.2f} ms  load {' '.join(f'{value:g}' for value in row['load_average'])}")
+
+    lines = [
         f"serve: {row['scene']}'s {row['hokuyo']} alone under {row['model']}, ME over TCP, {row['duration_s']:g} s over simulated"
-        f" {row['window_sim_s'][0]:g}..{row['window_sim_s'][1]:g} s (its slowest instant: {row['slowest_at_s']:g} s):"
-        f" rate {row['rate']:.1%}, gaps within {UTM_TOLERANCE:.0%} of the period {row['within_5pct']:.2%},"
-        f" deviation p50 {row['gap_deviation_p50_ms']:.2f} / p99 {row['gap_deviation_p99_ms']:.2f} / max {row['gap_deviation_max_ms']:.2f} ms"
-        f"  load {' '.join(f'{value:g}' for value in row['load_average'])}"
+        f" {row['window_sim_s'][0]:g}..{row['window_sim_s'][1]:g} s (its slowest instant: {row['slowest_at_s']:g} s): {gaps(row)}",
     ]
+    if "daemon_wakes" in row:
+        lines.append(f"  the daemon: {_counter_text(row)}")
+    if floor is not None:
+        lines.append(f"  its floor (a bare timerfd sender of the same ME message, {floor['duration_s']:g} s): {gaps(floor)}")
+    return lines
+
+
+def _counter_text(row: dict) -> str:
+    wakes = row["daemon_wakes"]
+    late = " ".join(f">{ms}ms {row[f'daemon_late_{ms}ms']}" for ms in (1, 2, 5))
+    return (f"scans waited for {row['daemon_scan_waits']}, sent late {row['daemon_late']}, skipped {row['daemon_skipped']};"
+            f" timer wake-ups {wakes}, late {late}")
 
 
 def bench_section(quick: bool) -> tuple[dict, list[str]]:
     """`lrf-emulator bench --section serve`: N = 1, 10, 40 URGs under `physical`, 8 UST-10LX (40 Hz) under
-    `formsma2011` and under `physical`, then the moonshot (100 URGs + 20 LMS200 under `formsma2011`; not in
-    a quick run: its start-up alone takes ~10 s), the dense-plume fleet (40 URGs inside railway's plume,
-    two workers), rescue's UTM-30LX-EW streaming ME under `physical` over
-    its slowest instant (40 s; quick: 10 s), then the capacity curve (`capacity.py`). Quick: 5 s each, else 30 s."""
+    `formsma2011` and under `physical` and their floor, then the moonshot (100 URGs + 20 LMS200 under `formsma2011`;
+    not in a quick run: its start-up alone takes ~10 s), the dense-plume fleet (40 URGs inside railway's plume,
+    two workers), rescue's UTM-30LX-EW streaming ME under `physical` over its slowest instant (40 s; quick: 10 s)
+    and its floor, then the capacity curve (`capacity.py`). Quick: 5 s each, else 30 s."""
     duration = 5.0 if quick else 30.0
     rows = [measure_serve(count, duration) for count in (1, 10, 40)]
     count, hokuyo = UST_ROW
     rows += [measure_serve(count, duration, model=preset, hokuyo=hokuyo) for preset in UST_PRESETS]
+    rows.append(measure_serve_floor(count, duration, hokuyo=hokuyo))
     if not quick:
         urgs, lms, model = MOONSHOT
         rows.append(measure_serve(urgs, duration, model=model, lms_count=lms))
@@ -507,5 +645,7 @@ def bench_section(quick: bool) -> tuple[dict, list[str]]:
     from emulator.bench.capacity import bench_curves  # the fleet past what its worker computes
 
     utm = measure_utm_stream(duration_s=10.0 if quick else UTM_WINDOW_S)
+    utm_floor = measure_utm_floor(duration_s=10.0 if quick else UTM_WINDOW_S)
     curves, curve_lines = bench_curves(quick)
-    return {"serve": rows, "utm_stream": utm, **curves}, [*table_lines(rows), *utm_lines(utm), *curve_lines]
+    return ({"serve": rows, "utm_stream": utm, "utm_floor": utm_floor, **curves},
+            [*table_lines(rows), *utm_lines(utm, utm_floor), *curve_lines])

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import socket
+
+import pytest
 
 from emulator.bench.serve_load import _LmsStream, cpu_seconds, fleet_scene_text, measure_serve
 from protocols.lms2xx import build_telegram
@@ -112,3 +115,40 @@ def test_rescues_utm_streams_me_and_each_gap_is_measured_against_its_25_ms_perio
     assert row["window_sim_s"][0] >= 0 and abs(row["window_sim_s"][1] - row["window_sim_s"][0] - 1.5) < 0.11
     assert 0 <= row["gap_deviation_p50_ms"] <= row["gap_deviation_p99_ms"] <= row["gap_deviation_max_ms"]
     assert 0 <= row["within_5pct"] <= 1
+
+
+@pytest.mark.parametrize(("hokuyo", "me"), [("ust-10lx", False), ("utm-30lx-ew", True)])
+def test_the_floor_sends_messages_framed_as_the_daemons_line_for_line(hokuyo: str, me: bool) -> None:
+    """The floor is only a floor if its messages are the daemon's size: each line as long as a Scip22Device's."""
+    import numpy as np
+
+    from emulator.bench.scip_floor import scan_message
+    from emulator.bench.serve_load import md_unlimited, me_unlimited
+    from emulator.sensors.hokuyo_models import HOKUYO_MODELS
+    from protocols.scip.scip22 import Scip22Device
+
+    @dataclasses.dataclass(frozen=True)
+    class Scan:
+        time_s: float
+        values: np.ndarray
+        intensities: np.ndarray
+
+    steps = HOKUYO_MODELS[hokuyo].steps
+    device = Scip22Device(lambda t: Scan(t, np.full(steps, 1234), np.full(steps, 56)), hokuyo, start_time=0.0)
+    command = (me_unlimited if me else md_unlimited)(hokuyo)
+    device.receive(command, 1.0)
+    sent = [output.data for output in device.poll(1.2) if output.data.startswith(command[:2]) and b"\n99" in output.data]
+    assert sent, "the device streamed nothing"
+    model = HOKUYO_MODELS[hokuyo]
+    floor = bytes(scan_message(command.rstrip(b"\n"), model.last_valid_step - model.first_valid_step + 1, 6 if me else 3, 1234))
+    assert [len(line) for line in floor.split(b"\n")] == [len(line) for line in sent[-1].split(b"\n")]
+
+
+def test_the_floor_streams_ust_10lx_at_their_40_hz() -> None:
+    from emulator.bench.serve_load import measure_serve_floor
+
+    row = measure_serve_floor(2, 1.5, hokuyo="ust-10lx")
+    assert row["model"] == "floor"
+    assert 100 <= row["scans_received"] <= 140  # 2 streams × 40/s × 1.5 s
+    assert 0.8 <= row["rate"] <= 1.2
+    assert 0 <= row["jitter_p50_ms"] <= row["jitter_p99_ms"]
