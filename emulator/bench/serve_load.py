@@ -513,7 +513,7 @@ def measure_utm_stream(
     with ServeProcess(scene_path, [f"{UTM_SENSOR}=tcp:127.0.0.1:0"], extra_args=extra, timeout_s=300.0) as daemon:
         counters: list[dict[str, int]] = []
         # the window opens WARM_UP_S after the first scan, and not before its simulated start
-        arrivals, measure_from, read_late = _stream_one(
+        scans, measure_from, read_late = _stream_one(
             daemon.endpoint(UTM_SENSOR).address, me_unlimited(hokuyo), duration_s,
             lambda now: now + max(WARM_UP_S, window_from_s - (time.time() - epoch)),
             on_window=lambda: counters.append(daemon.stats()),
@@ -528,7 +528,7 @@ def measure_utm_stream(
         "duration_s": duration_s,
         "window_sim_s": [round(window_sim[0], 1), round(window_sim[1], 1)],
         "slowest_at_s": slowest_at_s,
-        **_gap_figures(arrivals, duration_s, period_s),
+        **_gap_figures(scans, duration_s, period_s),
         "read_late": read_late,
         **daemon_counters(*counters),
         "load_average": [round(value, 2) for value in load],
@@ -542,11 +542,11 @@ def measure_utm_floor(duration_s: float = UTM_WINDOW_S) -> dict:
     hokuyo = next(spec.model for spec in load_scene(scene_path).sensors if spec.name == UTM_SENSOR)
     model = HOKUYO_MODELS[hokuyo]
     with FloorProcess([floor_spec(UTM_SENSOR, hokuyo, 0, chars=6)]) as floor:
-        arrivals, _, read_late = _stream_one(
+        scans, _, read_late = _stream_one(
             floor.endpoint(UTM_SENSOR).address, me_unlimited(hokuyo), duration_s, lambda now: now + WARM_UP_S
         )
         load = os.getloadavg()
-    return {"hokuyo": hokuyo, "duration_s": duration_s, **_gap_figures(arrivals, duration_s, model.period_s),
+    return {"hokuyo": hokuyo, "duration_s": duration_s, **_gap_figures(scans, duration_s, model.period_s),
             "read_late": read_late,
             "load_average": [round(value, 2) for value in load]}
 
@@ -554,10 +554,10 @@ def measure_utm_floor(duration_s: float = UTM_WINDOW_S) -> dict:
 def _stream_one(
     address: tuple[str, int], command: bytes, duration_s: float, window_from: Callable[[float], float],
     on_window: Callable[[], None] | None = None,
-) -> tuple[list[float], float, int]:
-    """One stream asked with `command`: its scans' arrivals from `window_from(now at its first scan)` for
-    `duration_s` (kernel receive stamps, as the fleet rows), that start (monotonic s) and the reads made
-    a period late; `on_window` is called as the window opens and as it closes."""
+) -> tuple[list[tuple[float, int]], float, int]:
+    """One stream asked with `command`: its scans (arrival, time stamp in ms) from `window_from(now at its
+    first scan)` for `duration_s` (kernel receive stamps, as the fleet rows), that start (monotonic s) and
+    the reads made a period late; `on_window` is called as the window opens and as it closes."""
     sock = socket.create_connection(address, timeout=5)
     stream = _Stream(sock)
     sock.sendall(command)
@@ -585,13 +585,19 @@ def _stream_one(
     finally:
         selector.close()
         sock.close()
-    return [arrival for arrival in stream.arrivals if arrival >= measure_from], measure_from, stream.read_late
+    kept = [(arrival, stamp) for arrival, stamp in zip(stream.arrivals, stream.stamps) if arrival >= measure_from]
+    return kept, measure_from, stream.read_late
 
 
-def _gap_figures(arrivals: list[float], duration_s: float, period_s: float) -> dict:
-    """Each scan's gap to the previous against the period: the share within UTM_TOLERANCE, deviation percentiles."""
+def _gap_figures(scans: list[tuple[float, int]], duration_s: float, period_s: float) -> dict:
+    """Each scan's gap to the previous against the period: the share within UTM_TOLERANCE, deviation
+    percentiles; and each scan's lateness against its own time stamp (the least delayed one defining
+    the offset, as the fleet rows)."""
+    arrivals = [arrival for arrival, _ in scans]
     gaps = np.diff(arrivals) if len(arrivals) > 1 else np.array([np.nan])
     deviation = np.abs(gaps - period_s) / period_s
+    offset = np.array([arrival - stamp / 1000.0 for arrival, stamp in scans]) if scans else np.array([np.nan])
+    lateness = (offset - offset.min()) * 1000.0
     return {
         "scans_received": len(arrivals),
         "rate": len(arrivals) / (duration_s / period_s),
@@ -599,6 +605,7 @@ def _gap_figures(arrivals: list[float], duration_s: float, period_s: float) -> d
         "gap_deviation_p50_ms": float(np.percentile(deviation, 50)) * period_s * 1000.0,
         "gap_deviation_p99_ms": float(np.percentile(deviation, 99)) * period_s * 1000.0,
         "gap_deviation_max_ms": float(np.max(deviation)) * period_s * 1000.0,
+        "lateness_p99_ms": float(np.percentile(lateness, 99)),
     }
 
 
@@ -606,7 +613,8 @@ def utm_lines(row: dict, floor: dict | None = None) -> list[str]:
     def gaps(row: dict) -> str:
         return (f"rate {row['rate']:.1%}, gaps within {UTM_TOLERANCE:.0%} of the period {row['within_5pct']:.2%},"
                 f" deviation p50 {row['gap_deviation_p50_ms']:.2f} / p99 {row['gap_deviation_p99_ms']:.2f}"
-                f" / max {row['gap_deviation_max_ms']:.2f} ms  load {' '.join(f'{value:g}' for value in row['load_average'])}")
+                f" / max {row['gap_deviation_max_ms']:.2f} ms, lateness p99 {row['lateness_p99_ms']:.2f} ms"
+                f"  load {' '.join(f'{value:g}' for value in row['load_average'])}")
 
     lines = [
         f"serve: {row['scene']}'s {row['hokuyo']} alone under {row['model']}, ME over TCP, {row['duration_s']:g} s over simulated"
