@@ -39,7 +39,7 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from emulator.bench.serve_load import SCM_TIMESTAMPNS, SO_TIMESTAMPNS
+from emulator.bench.serve_load import SCM_TIMESTAMPNS, stamp_received
 from emulator.bench.serve_process import ServeProcess
 from emulator.scene import load_scene
 from emulator.scene.sick_models import MODELS
@@ -148,7 +148,7 @@ def _stream(sources: dict[str, tuple[Address, float]], duration_s: float, warm_u
     for name, (address, period_s) in sources.items():
         sock = socket.create_connection(address, timeout=5)
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+        stamp_received(sock)
         sock.sendall(frame(b"sEN LMDscandata \x01", Dialect.BINARY))
         sock.setblocking(False)
         stream = Stream(name, period_s, sock)

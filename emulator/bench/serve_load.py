@@ -82,6 +82,21 @@ ON_TIME_MS = 10.0
 SO_TIMESTAMPNS = 35
 SCM_TIMESTAMPNS = SO_TIMESTAMPNS
 _TIMESPEC = struct.Struct("@ll")
+_stamp_keeper: socket.socket | None = None
+
+
+def stamp_received(sock: socket.socket) -> None:
+    """Have the kernel stamp `sock`'s received packets (SO_TIMESTAMPNS).
+
+    Linux switches receive stamping on for the whole system lazily (a deferred work item) when a
+    first socket asks, and off when the last such socket closes; packets queued meanwhile carry no
+    stamp and recvmsg stamps them when read. So the first socket that asks is kept open for the
+    process's life: a stream opened after earlier ones closed never starts with read-time stamps."""
+    global _stamp_keeper
+    if _stamp_keeper is None:
+        _stamp_keeper = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        _stamp_keeper.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+    sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
 WARM_UP_S = 3.0
 FIRST_SCAN_TIMEOUT_S = 120.0
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
@@ -190,7 +205,7 @@ class _Stream:
     stamps: list[int] = field(default_factory=list)
 
     def __post_init__(self) -> None:
-        self.sock.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
+        stamp_received(self.sock)
 
     def receive(self, realtime_to_monotonic: float) -> None:
         wanted = self.message_bytes - len(self.buffer) if self.message_bytes and self.echoed else 65536
