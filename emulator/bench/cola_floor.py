@@ -13,14 +13,11 @@ the client itself) allows: the daemon's figures are read against it.
 
 from __future__ import annotations
 
-import asyncio
-import socket
 import struct
-import sys
-import time
 
 import numpy as np
 
+from emulator.bench.floor import FloorStream, main
 from emulator.transport.timer import PreciseTimer
 from protocols.cola.framing import Dialect, frame
 from protocols.cola.scandata import Channel, ScanHeader, scandata_arguments
@@ -39,57 +36,20 @@ def telegram_payload(beams: int, period_ms: float) -> bytearray:
     return bytearray(PREFIX + scandata_arguments(header, [channel], Dialect.BINARY))
 
 
-class FloorStream:
-    """One stream: a listening socket; once a client is there, a telegram every period."""
+class ColaFloorStream(FloorStream):
+    """A LMDscandata telegram every period, its counters and times patched."""
 
-    def __init__(self, name: str, period_ms: float, phase_ms: float, beams: int, start: float, timer: PreciseTimer) -> None:
-        self.name, self.period_s, self.phase_s, self.start = name, period_ms / 1000, phase_ms / 1000, start
-        self.payload = telegram_payload(beams, period_ms)
-        self.timer = timer
-        self.listener = socket.create_server(("127.0.0.1", 0))
-        self.listener.setblocking(False)
-        self.client: socket.socket | None = None
-        self.index = 0
+    def __init__(self, fields: list[str], start: float, timer: PreciseTimer) -> None:
+        name, period_ms, phase_ms, beams = fields
+        super().__init__(name, float(period_ms), float(phase_ms), start, timer)
+        self.payload = telegram_payload(int(beams), float(period_ms))
 
-    async def serve(self) -> None:
-        loop = asyncio.get_running_loop()
-        client, _ = await loop.sock_accept(self.listener)
-        client.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self.client = client
-        self.index = int((time.monotonic() - self.start - self.phase_s) / self.period_s) + 1
-        self._schedule()
-
-    def _schedule(self) -> None:
-        self.timer.call_at(self.start + self.phase_s + self.index * self.period_s, self._send)
-
-    def _send(self) -> None:
-        due_us = int(round((self.phase_s + self.index * self.period_s) * 1e6))
-        COUNTERS.pack_into(self.payload, COUNTERS_AT, self.index & 0xFFFF, self.index & 0xFFFF)
+    def message(self, index: int) -> bytes:
+        due_us = int(round((self.phase_s + index * self.period_s) * 1e6))
+        COUNTERS.pack_into(self.payload, COUNTERS_AT, index & 0xFFFF, index & 0xFFFF)
         TIMES.pack_into(self.payload, TIMES_AT, due_us & 0xFFFF_FFFF, due_us & 0xFFFF_FFFF)
-        try:
-            self.client.send(frame(bytes(self.payload), Dialect.BINARY))  # type: ignore[union-attr]
-        except OSError:
-            return  # the client left: this stream is done
-        self.index += 1
-        self._schedule()
-
-
-async def serve(specs: list[str]) -> None:
-    loop = asyncio.get_running_loop()
-    timer = PreciseTimer(loop)
-    start = time.monotonic()
-    streams = []
-    for spec in specs:
-        name, period_ms, phase_ms, beams = spec.split(":")
-        streams.append(FloorStream(name, float(period_ms), float(phase_ms), int(beams), start, timer))
-    for stream in streams:
-        print(f"ready {stream.name} {stream.listener.getsockname()[1]}", flush=True)
-    await asyncio.gather(*(stream.serve() for stream in streams))
-    await asyncio.Event().wait()  # until the bench terminates this process
+        return frame(bytes(self.payload), Dialect.BINARY)
 
 
 if __name__ == "__main__":
-    try:
-        asyncio.run(serve(sys.argv[1:]))
-    except KeyboardInterrupt:
-        pass
+    main(ColaFloorStream)
