@@ -30,6 +30,7 @@ import numpy as np
 
 from emulator.bench.serve_load import ON_TIME_MS, _figures, _stream_all, fleet_scene_text, measure_serve, sensor_name
 from emulator.bench.serve_process import ServeProcess
+from emulator.bench.steal import StealMeter, steal_text
 
 CURVE_LOADS = (0.5, 1.0, 1.5, 2.0, 3.0)
 PROBE_SENSORS = 4  # the small fleet that measures a scan's cost
@@ -51,7 +52,8 @@ def measure_load(model: str, count: int, duration_s: float, capacity: float) -> 
         scene.write_text(fleet_scene_text(count))
         endpoints = [f"{sensor_name('urg-04lx', index)}=tcp:127.0.0.1:0" for index in range(count)]
         with ServeProcess(scene, endpoints, extra_args=["--model", model, "--workers", "1"], timeout_s=300.0) as daemon:
-            measured = _stream_all(daemon, count, 0, duration_s)
+            steal = StealMeter()
+            measured = _stream_all(daemon, count, 0, duration_s, on_window=steal.mark)
             load = os.getloadavg()
             stats = daemon.stats()
     streams, _, (cpu, daemon_cpu) = measured
@@ -74,6 +76,7 @@ def measure_load(model: str, count: int, duration_s: float, capacity: float) -> 
         "unsent": 1.0 - stats.get("served_scans", 0) / max(1, stats.get("instants_computed", 0)),
         "skipped": stats.get("skipped", 0),
         "load_average": row["load_average"],
+        "steal": steal.share,
     }
 
 
@@ -97,7 +100,7 @@ def curve_lines(curves: dict[str, tuple[float, list[dict]]]) -> list[str]:
                 f" {row['delivered_per_s']:>8.1f} {row['of_capacity']:>7.1%} {row['of_computable']:>8.1%}"
                 f" {row['worker_cores']:>6.2f} {row['fairness']:>5.2f} {row['lateness_p99_ms']:>6.0f}ms"
                 f" {row['instants_per_job']:>7.1f} {row['unsent']:>6.1%}"
-                f"  {' '.join(f'{value:g}' for value in row['load_average'])}"
+                f"  {' '.join(f'{value:g}' for value in row['load_average'])}, {steal_text(row['steal'])}"
             )
     return lines
 

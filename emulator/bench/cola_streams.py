@@ -24,6 +24,7 @@ sender's, not this client's own scheduling; only the telegram's header
 
 from __future__ import annotations
 
+import math
 import os
 import selectors
 import socket
@@ -41,6 +42,7 @@ import numpy as np
 
 from emulator.bench.serve_load import SCM_TIMESTAMPNS, stamp_received
 from emulator.bench.serve_process import ServeProcess
+from emulator.bench.steal import StealMeter
 from emulator.scene import load_scene
 from emulator.scene.sick_models import MODELS
 from emulator.sensors.sick_cola import configured_request, power_on_phase_ms
@@ -207,7 +209,7 @@ def _floor(scene_path: Path) -> Iterator[dict[str, Address]]:
         process.wait(10)
 
 
-def _rows(case: str, streams: list[Stream], counters: list[dict[str, int]] | None = None) -> list[dict]:
+def _rows(case: str, streams: list[Stream], steal: float, counters: list[dict[str, int]] | None = None) -> list[dict]:
     """A row per stream, with the load average and, for a daemon, its own count of timer wake-ups in the
     window and the share more than 1, 2, 5 ms late (SIGUSR1 stats: what its loop saw, whatever the client)."""
     load = os.getloadavg()[0]
@@ -217,22 +219,25 @@ def _rows(case: str, streams: list[Stream], counters: list[dict[str, int]] | Non
         wakes = after["wakes"] - before["wakes"]
         daemon = {"loop_wakes": wakes, **{f"loop_late_{ms}ms": (after[f"late_{ms}ms"] - before[f"late_{ms}ms"]) / wakes
                                           if wakes else float("nan") for ms in LATE_THRESHOLDS_MS}}
-    return [{"case": case, **stream.summary(), "load": load, **daemon} for stream in streams]
+    return [{"case": case, **stream.summary(), "load": load, "steal": steal, **daemon} for stream in streams]
 
 
 def _served(scene: Path, names: dict[str, float], workers: int, duration_s: float) -> list[dict]:
     """The scene's sensors streamed from a daemon, one row each."""
     with ServeProcess(scene, [f"{name}=tcp:127.0.0.1:0" for name in names], extra_args=("--workers", str(workers))) as daemon:
         counters: list[dict[str, int]] = []
+        steal = StealMeter()
         streams = _stream({name: (daemon.endpoint(name, "tcp").address, period) for name, period in names.items()},
-                          duration_s, on_window=lambda: counters.append(daemon.stats()))
-        return _rows("lms511-fine" if "lms511" in names else "six-units", streams, counters)
+                          duration_s, on_window=lambda: (counters.append(daemon.stats()), steal.mark()))
+        return _rows("lms511-fine" if "lms511" in names else "six-units", streams, steal.share, counters)
 
 
 def _floored(scene: Path, names: dict[str, float], duration_s: float) -> list[dict]:
     """The same streams from bare senders, one row each."""
+    steal = StealMeter()
     with _floor(scene) as addresses:
-        return _rows("floor", _stream({name: (addresses[name], period) for name, period in names.items()}, duration_s))
+        streams = _stream({name: (addresses[name], period) for name, period in names.items()}, duration_s, on_window=steal.mark)
+        return _rows("floor", streams, steal.share)
 
 
 def bench_section(quick: bool) -> tuple[dict, list[str]]:
@@ -246,12 +251,12 @@ def bench_section(quick: bool) -> tuple[dict, list[str]]:
         six_scene = _scene(Path(folder), six, "formsma2011")
         rows += _served(six_scene, periods, 0, duration_s) + _floored(six_scene, periods, duration_s)
     lines = ["cola: CoLa-B streams through the daemon, and from bare timerfd senders (floor): arrival-time jitter,"
-             " gaps within 5 % of the period, load average; the daemon's timer wake-ups more than 1 ms late",
+             " gaps within 5 % of the period, load average, CPU time stolen by the hypervisor; the daemon's timer wake-ups more than 1 ms late",
              f"  {'case':<12} {'client':<7} {'period':>7} {'scans':>6} {'missed':>6} {'gaps±5%':>8} {'p99 ms':>7} {'max ms':>7}"
-             f" {'load':>5} {'wake>1ms':>8}"]
+             f" {'load':>5} {'steal':>5} {'wake>1ms':>8}"]
     for row in rows:
         late = f"{row['loop_late_1ms']:>8.1%}" if "loop_late_1ms" in row else f"{'':>8}"
         lines.append(f"  {row['case']:<12} {row['client']:<7} {row['period_ms']:>7.1f} {row['telegrams']:>6} {row['missed']:>6}"
                      f" {row['gaps_within_5pct']:>8.1%} {row['jitter_p99_ms']:>7.2f} {row['jitter_max_ms']:>7.2f}"
-                     f" {row['load']:>5.2f} {late}")
+                     f" {row['load']:>5.2f} {'n/a' if math.isnan(row['steal']) else format(row['steal'], '.0%'):>5} {late}")
     return {"cola": rows}, lines

@@ -42,7 +42,9 @@ stats): scans it waited for or sent late, and its timer wake-ups more than
 1, 2, 5 ms late.
 
 Every figure is from one run (no best-of-N); the machine's load average is
-reported beside it, as the clients share the machine with the daemon.
+reported beside it, as the clients share the machine with the daemon, and so
+is the share of CPU time the hypervisor stole over the window (`steal`: on a
+virtual machine, a row taken while it was high times the host).
 """
 
 from __future__ import annotations
@@ -65,6 +67,7 @@ from typing import Callable
 import numpy as np
 
 from emulator.bench.serve_process import ServeProcess
+from emulator.bench.steal import StealMeter, steal_text
 from emulator.scene import bundled_scenes, load_scene
 from emulator.sensors.hokuyo_models import HOKUYO_MODELS
 from protocols.lms2xx import build_telegram
@@ -294,12 +297,14 @@ def measure_serve(
         extra = ["--model", model, *(["--workers", str(workers)] if workers is not None else [])]
         with ServeProcess(scene, endpoints, extra_args=extra, timeout_s=300.0) as daemon:
             counters: list[dict[str, int]] = []
+            steal = StealMeter()
             streams = _stream_all(daemon, count, lms_count, duration_s, hokuyo=hokuyo,
-                                  on_window=lambda: counters.append(daemon.stats()))
+                                  on_window=lambda: (counters.append(daemon.stats()), steal.mark()))
             load = os.getloadavg()
     period_s = HOKUYO_MODELS[hokuyo].period_s
     return {"model": model, "hokuyo": hokuyo, "dense_plume": dense_plume,
-            **_figures(count, lms_count, duration_s, workers, streams, load, period_s), **daemon_counters(*counters)}
+            **_figures(count, lms_count, duration_s, workers, streams, load, period_s), **daemon_counters(*counters),
+            "steal": steal.share}
 
 
 # The daemon's own counters over a window (SIGUSR1 stats; service.Daemon.stats): scans a device had to wait for
@@ -358,10 +363,12 @@ def measure_serve_floor(count: int, duration_s: float, hokuyo: str = URG_MODEL) 
     model = HOKUYO_MODELS[hokuyo]
     period_ms = int(round(model.period_s * 1000))
     specs = [floor_spec(sensor_name(hokuyo, index), hokuyo, index * period_ms // count) for index in range(count)]
+    steal = StealMeter()
     with FloorProcess(specs) as floor:
-        streams = _stream_all(floor, count, 0, duration_s, hokuyo=hokuyo)  # type: ignore[arg-type]
+        streams = _stream_all(floor, count, 0, duration_s, hokuyo=hokuyo, on_window=steal.mark)  # type: ignore[arg-type]
         load = os.getloadavg()
-    return {"model": "floor", "hokuyo": hokuyo, **_figures(count, 0, duration_s, 0, streams, load, model.period_s)}
+    return {"model": "floor", "hokuyo": hokuyo, **_figures(count, 0, duration_s, 0, streams, load, model.period_s),
+            "steal": steal.share}
 
 
 def _stream_all(
@@ -479,7 +486,7 @@ def table_lines(rows: list[dict]) -> list[str]:
             f" {row['jitter_p50_ms']:>10.2f} {row['jitter_p99_ms']:>7.2f} {row['lateness_p99_ms']:>8.2f}"
             f" {row['lateness_max_ms']:>7.1f} {row['cpu_ms_per_scan']:>11.2f} {row['daemon_cpu_ms_per_scan']:>10.2f}"
             f" {row['cpu_cores']:>6.2f}"
-            f"  {' '.join(f'{value:g}' for value in row['load_average'])}"
+            f"  {' '.join(f'{value:g}' for value in row['load_average'])}, {steal_text(row.get('steal', math.nan))}"
         )
         if "daemon_wakes" in row:
             lines.append(f"  {'':<11} the daemon: {_counter_text(row)}")
@@ -527,11 +534,12 @@ def measure_utm_stream(
     extra = ["--model", model, "--sensors", UTM_SENSOR, "--epoch", f"{epoch:.6f}"]
     with ServeProcess(scene_path, [f"{UTM_SENSOR}=tcp:127.0.0.1:0"], extra_args=extra, timeout_s=300.0) as daemon:
         counters: list[dict[str, int]] = []
+        steal = StealMeter()
         # the window opens WARM_UP_S after the first scan, and not before its simulated start
         scans, measure_from, read_late = _stream_one(
             daemon.endpoint(UTM_SENSOR).address, me_unlimited(hokuyo), duration_s,
             lambda now: now + max(WARM_UP_S, window_from_s - (time.time() - epoch)),
-            on_window=lambda: counters.append(daemon.stats()),
+            on_window=lambda: (counters.append(daemon.stats()), steal.mark()),
         )
         load = os.getloadavg()
     realtime_to_monotonic = time.time() - time.monotonic()
@@ -547,6 +555,7 @@ def measure_utm_stream(
         "read_late": read_late,
         **daemon_counters(*counters),
         "load_average": [round(value, 2) for value in load],
+        "steal": steal.share,
     }
 
 
@@ -556,14 +565,16 @@ def measure_utm_floor(duration_s: float = UTM_WINDOW_S) -> dict:
     scene_path = Path(next(bundled for bundled in bundled_scenes() if bundled.name == UTM_SCENE).path)
     hokuyo = next(spec.model for spec in load_scene(scene_path).sensors if spec.name == UTM_SENSOR)
     model = HOKUYO_MODELS[hokuyo]
+    steal = StealMeter()
     with FloorProcess([floor_spec(UTM_SENSOR, hokuyo, 0, chars=6)]) as floor:
         scans, _, read_late = _stream_one(
-            floor.endpoint(UTM_SENSOR).address, me_unlimited(hokuyo), duration_s, lambda now: now + WARM_UP_S
+            floor.endpoint(UTM_SENSOR).address, me_unlimited(hokuyo), duration_s, lambda now: now + WARM_UP_S,
+            on_window=steal.mark,
         )
         load = os.getloadavg()
     return {"hokuyo": hokuyo, "duration_s": duration_s, **_gap_figures(scans, duration_s, model.period_s),
             "read_late": read_late,
-            "load_average": [round(value, 2) for value in load]}
+            "load_average": [round(value, 2) for value in load], "steal": steal.share}
 
 
 def _stream_one(
@@ -629,7 +640,7 @@ def utm_lines(row: dict, floor: dict | None = None) -> list[str]:
         return (f"rate {row['rate']:.1%}, gaps within {UTM_TOLERANCE:.0%} of the period {row['within_5pct']:.2%},"
                 f" deviation p50 {row['gap_deviation_p50_ms']:.2f} / p99 {row['gap_deviation_p99_ms']:.2f}"
                 f" / max {row['gap_deviation_max_ms']:.2f} ms, lateness p99 {row['lateness_p99_ms']:.2f} ms"
-                f"  load {' '.join(f'{value:g}' for value in row['load_average'])}")
+                f"  load {' '.join(f'{value:g}' for value in row['load_average'])}, {steal_text(row.get('steal', math.nan))}")
 
     lines = [
         f"serve: {row['scene']}'s {row['hokuyo']} alone under {row['model']}, ME over TCP, {row['duration_s']:g} s over simulated"
