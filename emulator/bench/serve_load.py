@@ -37,9 +37,12 @@ The floor rows (`measure_serve_floor`, `measure_utm_floor`) are bare
 timerfd-woken senders (`scip_floor`) of the same message sizes, periods and
 revolution phases, read by the same client: what the machine itself allows
 at the moment, to read the daemon's rows against (as `bench --section cola`
-does). The daemon's rows carry its own counters over the window (SIGUSR1
-stats): scans it waited for or sent late, and its timer wake-ups more than
-1, 2, 5 ms late.
+does). The 8 UST-10LX have a second floor, `floor+cpu`: the same senders with
+burners (`burner.py`) keeping busy as much CPU as the `physical` row's workers
+used, in a worker's bursts: what a design that computes its scans on this
+machine could do. The daemon's rows carry its own counters over the window
+(SIGUSR1 stats): scans it waited for or sent late, and its timer wake-ups
+more than 1, 2, 5 ms late.
 
 Every figure is from one run (no best-of-N); the machine's load average is
 reported beside it, as the clients share the machine with the daemon, and so
@@ -60,9 +63,10 @@ import sys
 import tempfile
 import termios
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -349,6 +353,12 @@ class _FloorEndpoint:
     address: tuple[str, int]
 
 
+def worker_cores(row: dict) -> float:
+    """The cores a daemon row's workers used: all of its CPU less its own process's."""
+    scans = row["scans_received"] + row.get("lms_scans_received", 0)
+    return max(0.0, (row["cpu_ms_per_scan"] - row["daemon_cpu_ms_per_scan"]) * scans / 1000.0 / row["duration_s"])
+
+
 def floor_spec(name: str, hokuyo: str, phase_ms: int, chars: int = 3) -> str:
     """A `scip_floor` stream of model `hokuyo`'s period, its measured steps at `chars` a step (MD: 3, ME: 6)."""
     model = HOKUYO_MODELS[hokuyo]
@@ -356,19 +366,34 @@ def floor_spec(name: str, hokuyo: str, phase_ms: int, chars: int = 3) -> str:
     return f"{name}:{model.period_s * 1000:g}:{phase_ms}:{steps}:{chars}"
 
 
-def measure_serve_floor(count: int, duration_s: float, hokuyo: str = URG_MODEL) -> dict:
+def measure_serve_floor(count: int, duration_s: float, hokuyo: str = URG_MODEL, burn_cores: float = 0.0) -> dict:
     """The floor under `measure_serve(count, …, hokuyo=hokuyo)`: bare timerfd senders (`scip_floor`) of
     the same MD message sizes, period and revolution phases (the i-th of n turns i × period / n behind
-    the first, as `revolution_phase_ms`), read by the same client."""
+    the first, as `revolution_phase_ms`), read by the same client. `burn_cores` > 0: beside them, burners
+    (`burner.py`) keep that much CPU busy in a worker's bursts: the floor under the daemon's scan work."""
     model = HOKUYO_MODELS[hokuyo]
     period_ms = int(round(model.period_s * 1000))
     specs = [floor_spec(sensor_name(hokuyo, index), hokuyo, index * period_ms // count) for index in range(count)]
     steal = StealMeter()
-    with FloorProcess(specs) as floor:
+    with FloorProcess(specs) as floor, burners(burn_cores):
         streams = _stream_all(floor, count, 0, duration_s, hokuyo=hokuyo, on_window=steal.mark)  # type: ignore[arg-type]
         load = os.getloadavg()
-    return {"model": "floor", "hokuyo": hokuyo, **_figures(count, 0, duration_s, 0, streams, load, model.period_s),
-            "steal": steal.share}
+    return {"model": "floor+cpu" if burn_cores > 0 else "floor", "hokuyo": hokuyo,
+            **_figures(count, 0, duration_s, 0, streams, load, model.period_s), "steal": steal.share, "burn_cores": burn_cores}
+
+
+@contextmanager
+def burners(cores: float) -> Iterator[list[subprocess.Popen]]:
+    """Burner processes (`burner.py`) busy for `cores` of CPU together (at most one core each), until exit."""
+    shares = [1.0] * int(cores) + ([cores - int(cores)] if cores - int(cores) > 1e-3 else [])
+    processes = [subprocess.Popen([sys.executable, "-m", "emulator.bench.burner", f"{share:.4f}"]) for share in shares]
+    try:
+        yield processes
+    finally:
+        for process in processes:
+            process.terminate()
+        for process in processes:
+            process.wait(10)
 
 
 def _stream_all(
@@ -671,6 +696,8 @@ def bench_section(quick: bool) -> tuple[dict, list[str]]:
     count, hokuyo = UST_ROW
     rows += [measure_serve(count, duration, model=preset, hokuyo=hokuyo) for preset in UST_PRESETS]
     rows.append(measure_serve_floor(count, duration, hokuyo=hokuyo))
+    # the floor again with the CPU the `physical` row's workers used, kept busy beside the senders
+    rows.append(measure_serve_floor(count, duration, hokuyo=hokuyo, burn_cores=worker_cores(rows[-2])))
     if not quick:
         urgs, lms, model = MOONSHOT
         rows.append(measure_serve(urgs, duration, model=model, lms_count=lms))

@@ -152,3 +152,33 @@ def test_the_floor_streams_ust_10lx_at_their_40_hz() -> None:
     assert 100 <= row["scans_received"] <= 140  # 2 streams × 40/s × 1.5 s
     assert 0.8 <= row["rate"] <= 1.2
     assert 0 <= row["jitter_p50_ms"] <= row["jitter_p99_ms"]
+
+
+def test_a_burner_keeps_its_share_of_a_core_busy() -> None:
+    """The loaded floor is only the daemon's CPU demand if the burner burns what it is told: its bursts
+    and pauses (the pause formula checked exactly), and its CPU over wall time measured on a real run."""
+    import time as clock
+
+    from emulator.bench.burner import burn, idle_after
+
+    assert idle_after(0.016, 0.5) == pytest.approx(0.016)
+    assert idle_after(0.016, 1.0) == 0.0
+    with pytest.raises(ValueError):
+        idle_after(0.016, 0.0)
+    wall, cpu = clock.monotonic(), clock.process_time()
+    bursts = burn(0.5, burst_ms=10.0, until=wall + 0.4)
+    share = (clock.process_time() - cpu) / (clock.monotonic() - wall)
+    assert bursts >= 10
+    assert 0.3 < share < 0.75  # half a core, give or take the sleeps' wake-ups on a shared machine
+
+
+def test_the_loaded_floor_runs_burners_beside_the_senders_and_says_so() -> None:
+    from emulator.bench.serve_load import burners, measure_serve_floor, worker_cores
+
+    with burners(1.25) as processes:
+        assert len(processes) == 2 and all(process.poll() is None for process in processes)
+    assert all(process.poll() is not None for process in processes)  # stopped on leaving
+    row = measure_serve_floor(2, 1.0, hokuyo="ust-10lx", burn_cores=0.3)
+    assert row["model"] == "floor+cpu" and row["burn_cores"] == 0.3 and row["scans_received"] > 0
+    daemon_row = {"scans_received": 400, "cpu_ms_per_scan": 3.0, "daemon_cpu_ms_per_scan": 1.0, "duration_s": 2.0}
+    assert worker_cores(daemon_row) == pytest.approx(0.4)  # (3 - 1) ms x 400 scans over 2 s
