@@ -17,7 +17,8 @@ Per row:
   freshest scan, stamped when it was measured);
 - per job: the instants a worker job computed on average (a batch of 8 shares its numpy passes;
   one alone costs ~1.5x as much an instant), and unsent: the share of computed instants no
-  device sent (the daemon's counters over the whole run, warm-up included).
+  device sent (the daemon's counters over the measuring window; jobs in flight at its edges make
+  this a few tenths of a per cent uncertain).
 """
 
 from __future__ import annotations
@@ -45,6 +46,10 @@ def worker_capacity(model: str, duration_s: float) -> float:
     return 1000.0 / worker_ms
 
 
+# the daemon's counters read as their change over the measuring window
+WINDOW_COUNTERS = ("late", "skipped", "jobs_computed", "instants_computed", "served_scans")
+
+
 def measure_load(model: str, count: int, duration_s: float, capacity: float) -> dict:
     """`count` URGs on one worker under `model`: on time, delivered, fairness, lateness."""
     with tempfile.TemporaryDirectory(prefix="lrf-bench-capacity-") as folder:
@@ -53,9 +58,10 @@ def measure_load(model: str, count: int, duration_s: float, capacity: float) -> 
         endpoints = [f"{sensor_name('urg-04lx', index)}=tcp:127.0.0.1:0" for index in range(count)]
         with ServeProcess(scene, endpoints, extra_args=["--model", model, "--workers", "1"], timeout_s=300.0) as daemon:
             steal = StealMeter()
-            measured = _stream_all(daemon, count, 0, duration_s, on_window=steal.mark)
+            counters: list[dict[str, int]] = []
+            measured = _stream_all(daemon, count, 0, duration_s, on_window=lambda: (counters.append(daemon.stats()), steal.mark()))
             load = os.getloadavg()
-            stats = daemon.stats()
+    stats = {key: counters[-1][key] - counters[0][key] for key in WINDOW_COUNTERS}  # the window's, not the start-up's
     streams, _, (cpu, daemon_cpu) = measured
     row = _figures(count, 0, duration_s, 1, measured, load, 1.0 / SCANS_PER_SECOND)
     rates = np.array([len(stream.arrivals) / duration_s for stream in streams])
