@@ -15,6 +15,8 @@ Per row:
 - fairness: the slowest sensor's rate over the mean rate;
 - late p99: how long after its own stamp a scan arrived (a device that is behind sends its
   freshest scan, stamped when it was measured);
+- ms/inst: the worker's CPU per instant it computed in the window (the probe's is 1000 / capacity:
+  a larger fleet's scans may cost more each, which `of computable` counts against the daemon);
 - per job: the instants a worker job computed on average (a batch of 8 shares its numpy passes;
   one alone costs ~1.5x as much an instant), and unsent: the share of computed instants no
   device sent (the daemon's counters over the measuring window; jobs in flight at its edges make
@@ -80,6 +82,8 @@ def measure_load(model: str, count: int, duration_s: float, capacity: float) -> 
         "late": stats.get("late", 0),
         "instants_per_job": stats.get("instants_computed", 0) / max(1, stats.get("jobs_computed", 0)),
         "unsent": 1.0 - stats.get("served_scans", 0) / max(1, stats.get("instants_computed", 0)),
+        # the worker's CPU per instant it computed in the window, against the probe's 1000 / capacity
+        "worker_ms_per_instant": (cpu - daemon_cpu) * 1000.0 / max(1, stats.get("instants_computed", 0)),
         "skipped": stats.get("skipped", 0),
         "load_average": row["load_average"],
         "steal": steal.share,
@@ -97,7 +101,7 @@ def curve_lines(curves: dict[str, tuple[float, list[dict]]]) -> list[str]:
         "capacity curve: N URG-04LX (railway's world) on one worker, from half to 3x what it computes; one run each;"
         f" on time = within {ON_TIME_MS:g} ms of its slot",
         f"  {'model':<11} {'capacity':>8} {'N':>4} {'load':>5} {'on time':>8} {'scans/s':>8} {'of cap.':>7}"
-        f" {'of comp.':>8} {'worker':>6} {'fair':>5} {'late p99':>8} {'per job':>7} {'unsent':>6}  load avg",
+        f" {'of comp.':>8} {'worker':>6} {'fair':>5} {'late p99':>8} {'per job':>7} {'unsent':>6} {'ms/inst':>7}  load avg",
     ]
     for model, (capacity, rows) in curves.items():
         for row in rows:
@@ -105,7 +109,7 @@ def curve_lines(curves: dict[str, tuple[float, list[dict]]]) -> list[str]:
                 f"  {model:<11} {capacity:>6.0f}/s {row['sensors']:>4} {row['load_factor']:>4.1f}x {row['on_time']:>8.1%}"
                 f" {row['delivered_per_s']:>8.1f} {row['of_capacity']:>7.1%} {row['of_computable']:>8.1%}"
                 f" {row['worker_cores']:>6.2f} {row['fairness']:>5.2f} {row['lateness_p99_ms']:>6.0f}ms"
-                f" {row['instants_per_job']:>7.1f} {row['unsent']:>6.1%}"
+                f" {row['instants_per_job']:>7.1f} {row['unsent']:>6.1%} {row['worker_ms_per_instant']:>7.2f}"
                 f"  {' '.join(f'{value:g}' for value in row['load_average'])}, {steal_text(row['steal'])}"
             )
     return lines
