@@ -24,7 +24,6 @@ sender's, not this client's own scheduling; only the telegram's header
 
 from __future__ import annotations
 
-import math
 import os
 import selectors
 import socket
@@ -42,7 +41,7 @@ import numpy as np
 
 from emulator.bench.serve_load import SCM_TIMESTAMPNS, stamp_received
 from emulator.bench.serve_process import ServeProcess
-from emulator.bench.steal import StealMeter
+from emulator.bench.steal import StealMeter, steal_percent
 from emulator.scene import load_scene
 from emulator.scene.sick_models import MODELS
 from emulator.sensors.sick_cola import configured_request, power_on_phase_ms
@@ -258,5 +257,5 @@ def bench_section(quick: bool) -> tuple[dict, list[str]]:
         late = f"{row['loop_late_1ms']:>8.1%}" if "loop_late_1ms" in row else f"{'':>8}"
         lines.append(f"  {row['case']:<12} {row['client']:<7} {row['period_ms']:>7.1f} {row['telegrams']:>6} {row['missed']:>6}"
                      f" {row['gaps_within_5pct']:>8.1%} {row['jitter_p99_ms']:>7.2f} {row['jitter_max_ms']:>7.2f}"
-                     f" {row['load']:>5.2f} {'n/a' if math.isnan(row['steal']) else format(row['steal'], '.0%'):>5} {late}")
+                     f" {row['load']:>5.2f} {steal_percent(row['steal']):>5} {late}")
     return {"cola": rows}, lines

@@ -60,5 +60,10 @@ class StealMeter:
         return steal_share(self._marks[0], self._marks[-1]) if len(self._marks) >= 2 else math.nan
 
 
+def steal_percent(share: float) -> str:
+    """A table cell: "12%", or "n/a" where the machine does not count steal."""
+    return "n/a" if math.isnan(share) else f"{share:.0%}"
+
+
 def steal_text(share: float) -> str:
-    return "steal n/a" if math.isnan(share) else f"steal {share:.0%}"
+    return f"steal {steal_percent(share)}"
