@@ -5,7 +5,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 SCENE  ?= railway
 
-.PHONY: runtime install serve test soak robustness-soak bench validation lint clean
+.PHONY: runtime install serve test soak robustness-soak bench validation clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
