@@ -111,6 +111,7 @@ class ScanCache:
         defer: Defer | None = None,
         now: Now | None = None,
         speed: Callable[[], float] | None = None,
+        after_send: bool = False,
     ) -> None:
         if size < 2 * batch:
             raise ValueError(f"a scan cache of {size} cannot hold two batches of {batch}")
@@ -135,6 +136,10 @@ class ScanCache:
         self._strides: dict[RequestKey, float] = {}
         self._told_strides: dict[RequestKey, float] = {}  # streams' periods their devices told (`expect`)
         self._observer = observer  # told of each scan handed to a device (once per instant): must return at once
+        # `after_send`: what a device's read of its scan sets going (foreseeing the stream's next scans,
+        # telling the observer) waits for `settle()`, which the daemon calls once the device's output has
+        # gone: a wake-up's work before its send is then the lookup and the encoding alone.
+        self._after_send: list[Callable[[], None]] | None = [] if after_send else None
         self._observed_tick: int | None = None
         # scans dropped by a live change whose old job is still under way (`invalidate_from`)
         self._outdated: dict[tuple, Future] = {}
@@ -154,10 +159,11 @@ class ScanCache:
         if fresher is None and not ready and self._now is not None and self._behind():
             fresher = self._newest_ready(shape, tick)  # a request read at once (`input_scan`): the newest there is
         if fresher is not None:  # behind: the freshest scan not yet sent, with its own time (not the one asked)
-            self._follow_stream(time_s, request)
+            self._then(self._follow_stream, time_s, request)
             future = fresher
         else:
-            future = self.request(time_s, **request)
+            future = self._future(time_s, request)
+            self._then(self._follow_stream, time_s, request)
             if not _ready(future):
                 future = self._future(time_s, request)  # a dropped instant is started again
                 self._start_now(future)  # a batch still waiting for its quiet moment: the caller needs it now
@@ -174,8 +180,22 @@ class ScanCache:
             self._observed_tick = scan_tick
             self._count_served(shape, scan_tick, late=scan_tick < tick)
             if self._observer is not None:
-                self._observer(scan)
+                self._then(self._observer, scan)
         return scan
+
+    def _then(self, work: Callable[..., None], *args: Any) -> None:
+        """`work(*args)` now, or (`after_send`) at the next `settle()`, in order."""
+        if self._after_send is None:
+            work(*args)
+        else:
+            self._after_send.append(lambda: work(*args))
+
+    def settle(self) -> None:
+        """Do what reads of scans put off (`after_send`): the device's output has gone."""
+        while self._after_send:
+            work, self._after_send = self._after_send, []
+            for item in work:
+                item()
 
     def _count_served(self, shape: RequestKey, tick: int, *, late: bool) -> None:
         previous = self._served_tick.get(shape)

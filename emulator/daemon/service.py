@@ -176,7 +176,9 @@ class DeviceSession:
     a device that says which scan a request now would read (`latest_scan_time`,
     e.g. a URG's GD) gets them once that scan is computed; meanwhile they wait,
     in order, up to MAX_HELD_INPUT_BYTES (a flood of GDs blocked the loop on
-    every new scan and starved the other sensors).
+    every new scan and starved the other sensors). `settle()` runs once the device's
+    output has gone: what its reads of scans put off (foreseeing the next batch,
+    telling the view), so a wake-up's work before its send stays small and even.
     """
 
     def __init__(
@@ -190,6 +192,7 @@ class DeviceSession:
         expect: Callable[[dict, float | None], None] | None = None,
         next_scan: Callable[[float], tuple[Future | None, float | None]] | None = None,
         input_scan: Callable[[float], Future | None] | None = None,
+        settle: Callable[[], None] | None = None,
     ) -> None:
         self.device = device
         self.endpoint: PtyEndpoint | TcpEndpoint | None = None
@@ -200,6 +203,7 @@ class DeviceSession:
         self._expect = expect
         self._next_scan = next_scan
         self._input_scan = input_scan
+        self._settle = settle
         self._call_later = call_later or loop.call_later
         self._timer: Cancellable | None = None
         self._held: bytearray | None = None  # input waiting for the scan it may read
@@ -311,6 +315,8 @@ class DeviceSession:
     def _deliver(self, outputs: list[Output]) -> None:
         if outputs and self.endpoint is not None:
             self.endpoint.send(outputs)
+        if self._settle is not None:  # the scan cache's bookkeeping, once the output has gone
+            self._settle()
         self._schedule()
 
     def _tell_request(self) -> None:
@@ -434,13 +440,13 @@ class Daemon:
         for ordinal, (spec, addresses) in enumerate(self._plan):
             scans = self.scan_caches[spec.name] = ScanCache(
                 factory(spec), executor, batch=stream_batch(spec) or SCAN_BATCH, phase=ordinal, observer=self._on_scan,
-                defer=self._defer, now=self.clock.now, speed=lambda: self.clock.speed,
+                defer=self._defer, now=self.clock.now, speed=lambda: self.clock.speed, after_send=True,
             )
             for position, address in enumerate(addresses):
                 device = self._device_factory(spec, scans, phase_ms=self._phase_ms(spec))
                 session = DeviceSession(
                     device, self.clock, loop, scans.prefetch, self._timer.call_later, pending=scans.pending,
-                    expect=scans.expect, next_scan=scans.next_scan, input_scan=scans.input_scan,
+                    expect=scans.expect, next_scan=scans.next_scan, input_scan=scans.input_scan, settle=scans.settle,
                 )
                 try:
                     readies.append(self._open(spec, address, session, loop))

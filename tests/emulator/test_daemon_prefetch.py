@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import heapq
+import re
 import itertools
 import socket
 import threading
@@ -162,3 +163,30 @@ def test_a_new_clients_first_scans_are_computed_ahead_and_the_loop_never_waits_f
                 while b"\x02\x80\xd6\x02\xb0" not in lms_received:  # a B0 scan telegram's head (9600 Bd)
                     lms_received += lms.recv(65536)
         assert stats(daemon)["scan_waits"] == 0
+
+
+def test_a_wake_up_sends_first_and_settles_the_scan_caches_bookkeeping_after() -> None:
+    """What a device's read of its scan put off (the next batch foreseen, the view told) runs after its
+    output has gone, at each delivery: a wake-up's work before its send stays the lookup and encoding."""
+    clock = ManualClock()
+    timers = SimulatedTimers(clock)
+    order: list[str] = []
+
+    def scans(time_s: float, *, count: int, **_: Any) -> SimpleNamespace:
+        order.append("read")
+        return SimpleNamespace(values=np.full(count, 1000))
+
+    device = Lms200Device(scans, baud=500000)
+    loop = asyncio.new_event_loop()
+    try:
+        session = DeviceSession(device, clock, loop, call_later=timers.call_later, settle=lambda: order.append("settle"))
+        session.endpoint = SimpleNamespace(send=lambda outputs: order.append("send"))  # type: ignore[assignment]
+        session.start()
+        timers.run_until(0.1)
+        session.received(build_telegram(0, b"\x20\x24"))  # every scan, continuously
+        timers.run_until(0.5)
+    finally:
+        loop.close()
+    tokens = "".join({"read": "R", "send": "s", "settle": "t"}[name] for name in order)
+    assert re.fullmatch(r"(R*s?t)*", tokens), tokens  # each delivery: its reads, its send, then the settle
+    assert tokens.count("Rst") > 10  # the scans streamed: read, sent, settled

@@ -236,3 +236,42 @@ def test_scans_a_live_change_drops_before_their_batch_starts_are_not_computed(
     scan_thread.shutdown(wait=True)
     batch = [times for kind, times in recording.calls if kind == "scans"][0]
     assert ticks(batch) == [round(index * LMS_SCAN_PERIOD_S / TICK) for index in range(4, 8)]
+
+
+class SubmitLog:
+    """An executor that notes each job as it is submitted (on the caller's thread), then runs it."""
+
+    def __init__(self, executor: ThreadPoolExecutor) -> None:
+        self.executor = executor
+        self.jobs: list[tuple[str, list[float]]] = []
+
+    def submit(self, fn: Any, /, *args: Any, **kwargs: Any) -> Any:
+        times = list(args[0]) if fn.__name__ == "scans" else [args[0]]
+        self.jobs.append((fn.__name__, times))
+        return self.executor.submit(fn, *args, **kwargs)
+
+
+def test_after_send_the_next_batch_is_foreseen_at_settle_and_the_stream_is_the_same(
+    sensor: LmsSensor, request_keywords: dict[str, Any], scan_thread: ThreadPoolExecutor
+) -> None:
+    """As the daemon runs it (`after_send`): a device's read of its scan does only the lookup; foreseeing
+    the stream's next batch and telling the observer wait for `settle()`, which the daemon calls once
+    the output has gone. Settled after every read, the jobs, the scans and the observer's calls are
+    those of a cache that does it all at once."""
+    times = [index * LMS_SCAN_PERIOD_S for index in range(1, 3 * SCAN_BATCH + 1)]
+    runs = {}
+    for after_send in (False, True):
+        log, observed = SubmitLog(scan_thread), []
+        cache = ScanCache(sensor, log, observer=lambda scan: observed.append(scan.time_s), after_send=after_send)
+        served = []
+        for index, time_s in enumerate(times):
+            served.append(cache(time_s, **request_keywords))
+            if after_send and index == 2:  # the read that makes the stream steady: its batch waits for settle
+                assert [kind for kind, _ in log.jobs] == ["scan"] * 3
+                assert observed == times[:2]
+                cache.settle()
+                assert log.jobs[3][0] == "scans" and observed == times[:3]
+            cache.settle()
+        runs[after_send] = (log.jobs, [scan.time_s for scan in served], observed)
+    assert runs[True] == runs[False]
+    assert [kind for kind, _ in runs[True][0]].count("scans") >= 2
