@@ -190,6 +190,16 @@ class ScanCache:
         else:
             self._after_send.append(lambda: work(*args))
 
+    def ready_scan(self, time_s: float) -> Scan | None:
+        """The last request's scan at `time_s` if it is computed, else None; nothing else happens (no
+        counting, no foreseeing): a device encodes its next scan ahead with it. None while behind: the
+        device will then send a fresher scan than the one asked for."""
+        request = self._last_request
+        if request is None or (self._now is not None and self._behind()):
+            return None
+        future = self._futures.get(_cache_key(time_s, request))
+        return future.result() if _ready(future) else None
+
     def settle(self) -> None:
         """Do what reads of scans put off (`after_send`): the device's output has gone."""
         while self._after_send:

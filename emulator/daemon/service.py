@@ -178,7 +178,8 @@ class DeviceSession:
     in order, up to MAX_HELD_INPUT_BYTES (a flood of GDs blocked the loop on
     every new scan and starved the other sensors). `settle()` runs once the device's
     output has gone: what its reads of scans put off (foreseeing the next batch,
-    telling the view), so a wake-up's work before its send stays small and even.
+    telling the view), so a wake-up's work before its send stays small and even; then a
+    device that can (`prepare_next`) encodes its next scan ahead if `ready_scan` has it.
     """
 
     def __init__(
@@ -193,6 +194,7 @@ class DeviceSession:
         next_scan: Callable[[float], tuple[Future | None, float | None]] | None = None,
         input_scan: Callable[[float], Future | None] | None = None,
         settle: Callable[[], None] | None = None,
+        ready_scan: Callable[[float], Any] | None = None,
     ) -> None:
         self.device = device
         self.endpoint: PtyEndpoint | TcpEndpoint | None = None
@@ -204,6 +206,7 @@ class DeviceSession:
         self._next_scan = next_scan
         self._input_scan = input_scan
         self._settle = settle
+        self._ready_scan = ready_scan
         self._call_later = call_later or loop.call_later
         self._timer: Cancellable | None = None
         self._held: bytearray | None = None  # input waiting for the scan it may read
@@ -318,6 +321,9 @@ class DeviceSession:
         if self._settle is not None:  # the scan cache's bookkeeping, once the output has gone
             self._settle()
         self._schedule()
+        prepare_next = getattr(self.device, "prepare_next", None)
+        if prepare_next is not None and self._ready_scan is not None:  # its next scan encoded ahead, if computed
+            prepare_next(self._ready_scan)
 
     def _tell_request(self) -> None:
         """Tell the scan cache what the device will ask for, if it can say (`scan_request`), so even
@@ -447,6 +453,7 @@ class Daemon:
                 session = DeviceSession(
                     device, self.clock, loop, scans.prefetch, self._timer.call_later, pending=scans.pending,
                     expect=scans.expect, next_scan=scans.next_scan, input_scan=scans.input_scan, settle=scans.settle,
+                    ready_scan=scans.ready_scan,
                 )
                 try:
                     readies.append(self._open(spec, address, session, loop))

@@ -383,9 +383,12 @@ class UrgDevice(StreamingDevice):
 
     # --- scans ---------------------------------------------------------------------
 
-    def _scan_body(self, scan: DeviceScan, request: ScanRequest, command: bytes) -> bytes:
+    def _stamp_ms(self, scan: DeviceScan) -> int:
+        return int(scan.timestamp_ms)
+
+    def _encode_data(self, scan: DeviceScan, request: ScanRequest, command: bytes) -> bytes:
         values = cluster_minimum(np.asarray(scan.values)[request.start : request.end + 1], request.cluster)
-        return self._stamp_line(int(scan.timestamp_ms)) + data_lines(encode_values(values, VALUE_CHARS[command]))
+        return data_lines(encode_values(values, VALUE_CHARS[command]))
 
     # --- SCIP 1.1 -----------------------------------------------------------------
 

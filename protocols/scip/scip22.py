@@ -367,8 +367,11 @@ class Scip22Device(StreamingDevice):
             for index, message in self._stream_through(self._latest_index(now - sweep))
         ]
 
-    def _scan_body(self, scan: EchoScan, request: ScanRequest, command: bytes) -> bytes:
-        """Stamp line and data lines of the requested steps; a cluster reports its nearest step."""
+    def _stamp_ms(self, scan: EchoScan) -> int:
+        return round(scan.time_s * 1000)
+
+    def _encode_data(self, scan: EchoScan, request: ScanRequest, command: bytes) -> bytes:
+        """Data lines of the requested steps; a cluster reports its nearest step."""
         fmt = FORMATS[command]
         steps = slice(request.start, request.end + 1)
         chosen: slice | np.ndarray = steps  # unclustered: the steps themselves, read without copying an index
@@ -384,7 +387,7 @@ class Scip22Device(StreamingDevice):
         if fmt.intensity:
             strengths = _intensity_of(source, shape)[chosen]
             strengths = strengths[:, : ranges.shape[1]] if ranges.ndim > 1 else strengths
-        return self._stamp_line(round(scan.time_s * 1000)) + data_lines(encode_steps(ranges, strengths, fmt.width))
+        return data_lines(encode_steps(ranges, strengths, fmt.width))
 
 
 def _intensity_of(intensities: np.ndarray | None, shape: tuple[int, ...]) -> np.ndarray:

@@ -41,7 +41,7 @@ class Stream:
 class StreamingDevice:
     """The revolution grid (scan k at phase + k · period, whole milliseconds), the timer
     and the stream. Subclasses set `_scan_source`, `_period_ms`, `_phase_ms`,
-    `_epoch_ms`, `_stream`, `_laser_on`, `_bit_rate` and implement `_scan_body`."""
+    `_epoch_ms`, `_stream`, `_laser_on`, `_bit_rate` and implement `_stamp_ms` and `_encode_data`."""
 
     _scan_source: Callable[[float], Any]
     _period_ms: int
@@ -50,10 +50,38 @@ class StreamingDevice:
     _stream: Stream | None
     _laser_on: bool
     _bit_rate: int
+    # The next streamed scan's data lines, encoded ahead (`prepare_next`): the scan's arrays, the request
+    # and command they were encoded for, and the lines.
+    _prepared: tuple[tuple, ScanRequest, bytes, bytes] | None = None
+
+    def _stamp_ms(self, scan: Any) -> int:
+        """The scan's time stamp in ms, as the model stamps it."""
+        raise NotImplementedError
+
+    def _encode_data(self, scan: Any, request: ScanRequest, command: bytes) -> bytes:
+        """The data lines of `scan` as `command` sends `request`'s steps."""
+        raise NotImplementedError
 
     def _scan_body(self, scan: Any, request: ScanRequest, command: bytes) -> bytes:
-        """Stamp line and data lines of `scan` as `command` sends them."""
-        raise NotImplementedError
+        """Stamp line and data lines of `scan` as `command` sends them (the lines encoded ahead if they
+        were, for this very scan)."""
+        prepared = self._prepared
+        if prepared is not None and prepared[1] == request and prepared[2] == command and _same_arrays(prepared[0], scan):
+            data = prepared[3]
+        else:
+            data = self._encode_data(scan, request, command)
+        return self._stamp_line(self._stamp_ms(scan)) + data
+
+    def prepare_next(self, ready_scan: Callable[[float], Any | None]) -> None:
+        """Encode the stream's next scan ahead, if `ready_scan(time)` has it computed already (None: not
+        yet): its deadline then only stamps, frames and sends it. Nothing sent changes: the lines are
+        reused only for the very scan (the same arrays) the deadline reads, with the same request."""
+        stream = self._stream
+        if stream is None:
+            return
+        scan = ready_scan(self._scan_time(stream.next_index))
+        if scan is not None:
+            self._prepared = (_arrays(scan), stream.request, stream.command, self._encode_data(scan, stream.request, stream.command))
 
     def _set_bit_rate(self, params: bytes) -> bytes:
         """SS on a serial link: 01 not a number, 02 not a rate the unit has, 03 the rate it has already."""
@@ -138,6 +166,18 @@ class StreamingDevice:
             stream.remaining -= scans
             if stream.remaining <= 0:
                 self._stream, self._laser_on = None, False
+
+
+SCAN_ARRAYS = ("values", "intensities", "echoes", "echo_intensities")
+
+
+def _arrays(scan: Any) -> tuple:
+    """What a scan's data lines are made of, held by identity."""
+    return tuple(getattr(scan, name, None) for name in SCAN_ARRAYS)
+
+
+def _same_arrays(arrays: tuple, scan: Any) -> bool:
+    return all(held is getattr(scan, name, None) for held, name in zip(arrays, SCAN_ARRAYS))
 
 
 def frame(echo: bytes, status: bytes, body: bytes = b"") -> bytes:

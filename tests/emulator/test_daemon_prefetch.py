@@ -190,3 +190,41 @@ def test_a_wake_up_sends_first_and_settles_the_scan_caches_bookkeeping_after() -
     tokens = "".join({"read": "R", "send": "s", "settle": "t"}[name] for name in order)
     assert re.fullmatch(r"(R*s?t)*", tokens), tokens  # each delivery: its reads, its send, then the settle
     assert tokens.count("Rst") > 10  # the scans streamed: read, sent, settled
+
+
+def test_a_streaming_hokuyo_encodes_its_next_scan_after_a_send_and_its_deadline_only_sends() -> None:
+    """After each send (and the settle) the session lets the device encode its next scan if the scan
+    cache has it (`ready_scan`); at the deadline the scan is looked up, found encoded, and sent."""
+    from protocols.scip.scip22 import Scip22Device
+
+    clock = ManualClock()
+    timers = SimulatedTimers(clock)
+    order: list[str] = []
+    kept: dict[int, Scan] = {}
+
+    def scan_at(time_s: float) -> Scan:
+        tick = round(time_s * 1e6)
+        if tick not in kept:
+            kept[tick] = Scan("ust", "UST-10LX", time_s, np.zeros(1081), np.full(1081, 1000 + tick % 977))
+        return kept[tick]
+
+    def read(time_s: float) -> Scan:
+        order.append("read")
+        return scan_at(time_s)
+
+    device = Scip22Device(read, "ust-10lx")
+    encode = device._encode_data
+    device._encode_data = lambda *args: (order.append("encode"), encode(*args))[1]  # type: ignore[method-assign]
+    loop = asyncio.new_event_loop()
+    try:
+        session = DeviceSession(device, clock, loop, call_later=timers.call_later, settle=lambda: order.append("settle"),
+                                ready_scan=scan_at)
+        session.endpoint = SimpleNamespace(send=lambda outputs: order.append("send"))  # type: ignore[assignment]
+        session.start()
+        session.received(b"MD0000108000000\n")
+        timers.run_until(0.5)
+    finally:
+        loop.close()
+    tokens = "".join({"read": "R", "encode": "E", "send": "s", "settle": "t"}[name] for name in order)
+    assert tokens.count("RstE") >= 15  # looked up, sent, settled, the next one encoded
+    assert tokens.count("REs") <= 1  # encoded at its deadline: at most the stream's first scan

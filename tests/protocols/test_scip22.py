@@ -17,6 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
+from emulator.sensors.scan import Scan
 from protocols.scip import UrgDevice
 from protocols.scip.scip22 import Scip22Device
 
@@ -366,3 +367,67 @@ def test_ss_sets_a_usb_units_rate_and_an_ethernet_unit_has_none():
     assert answer(usb, b"SS11520x") == b"SS11520x\n01Q\n\n"
     assert usb.baud is None  # USB: never paced
     assert answer(Scip22Device(flat(), "ust-10lx"), b"SS115200") == b"SS115200\n0Ff\n\n"
+
+
+def _varying_scans(steps: int = STEPS):
+    """A scan per instant, the same object each time it is asked for (as the daemon's scan cache
+    gives it): ranges, intensities and three echoes that change with the instant."""
+    kept = {}
+
+    def source(t: float) -> Scan:
+        tick = round(t * 1e6)
+        if tick not in kept:
+            rng = np.random.default_rng(tick)
+            echoes = np.sort(rng.integers(20, 30000, (steps, 3)), axis=1)
+            echoes[rng.random(steps) < 0.3, 1:] = -1
+            kept[tick] = Scan("s", "m", t, np.zeros(steps), echoes[:, 0].copy(), intensities=rng.integers(0, 5000, steps),
+                              echoes=echoes, echo_intensities=rng.integers(0, 5000, (steps, 3)))
+        return kept[tick]
+
+    return source
+
+
+@pytest.mark.parametrize("model, command", [
+    *((model, command) for model in ("ust-10lx", "utm-30lx-ew")
+      for command in (b"MD0044072501000", b"ME0000108002000", b"ND0000108000000", b"NE0100090003000")),
+    ("urg-04lx", b"MD0044072501000"), ("urg-04lx", b"MS0100050002000"),
+])
+def test_a_scan_encoded_ahead_sends_the_same_bytes(model, command):
+    """`prepare_next` (the daemon calls it after each send) encodes the stream's next scan early; the
+    deadline reuses those lines only for that very scan. Every message is byte-identical to a device
+    that never prepares: with the right scan ready, with a stale one offered instead (a live change
+    replaced it), and with none."""
+    steps = 769 if model == "urg-04lx" else STEPS
+
+    def stream(offer):
+        source = _varying_scans(steps)
+        device = UrgDevice(source) if model == "urg-04lx" else Scip22Device(source, model)
+        device.receive(command + b"\n", 0.0)
+        sent = []
+        for _ in range(12):
+            deadline = device.next_deadline()
+            sent += [o.data for o in device.poll(deadline)]
+            if offer is not None:
+                device.prepare_next(lambda t: offer(source, t))
+        return sent
+
+    plain = stream(None)
+    assert len(plain) >= 10
+    assert stream(lambda source, t: source(t)) == plain
+    stale = _varying_scans(steps)  # equal-looking scans of other objects, with other values
+    assert stream(lambda source, t: stale(t + 0.5)) == plain
+    assert stream(lambda source, t: None) == plain
+
+
+def test_the_lines_encoded_ahead_are_the_ones_sent():
+    """The reuse is real: encoding at the deadline is skipped for the scan prepared."""
+    source = _varying_scans()
+    device = Scip22Device(source, "ust-10lx")
+    device.receive(b"ME0000108000000\n", 0.0)
+    device.poll(device.next_deadline())
+    device.prepare_next(source)
+    encoded = []
+    original = device._encode_data
+    device._encode_data = lambda *args: encoded.append(args) or original(*args)  # type: ignore[method-assign]
+    [message] = [o.data for o in device.poll(device.next_deadline())]
+    assert encoded == [] and b"ME0000108000000" in message
