@@ -65,11 +65,7 @@ class StreamingDevice:
     def _scan_body(self, scan: Any, request: ScanRequest, command: bytes) -> bytes:
         """Stamp line and data lines of `scan` as `command` sends them (the lines encoded ahead if they
         were, for this very scan)."""
-        prepared = self._prepared
-        if prepared is not None and prepared[1] == request and prepared[2] == command and _same_arrays(prepared[0], scan):
-            data = prepared[3]
-        else:
-            data = self._encode_data(scan, request, command)
+        data = self._prepared[3] if self._holds_prepared(scan, request, command) else self._encode_data(scan, request, command)
         return self._stamp_line(self._stamp_ms(scan)) + data
 
     def prepare_next(self, ready_scan: Callable[[float], Any | None]) -> None:
@@ -80,8 +76,13 @@ class StreamingDevice:
         if stream is None:
             return
         scan = ready_scan(self._scan_time(stream.next_index))
-        if scan is not None:
+        if scan is not None and not self._holds_prepared(scan, stream.request, stream.command):  # not twice (a reply between)
             self._prepared = (_arrays(scan), stream.request, stream.command, self._encode_data(scan, stream.request, stream.command))
+
+    def _holds_prepared(self, scan: Any, request: ScanRequest, command: bytes) -> bool:
+        """Whether the lines encoded ahead are this very scan's, for this request and command."""
+        prepared = self._prepared
+        return prepared is not None and prepared[1] == request and prepared[2] == command and _same_arrays(prepared[0], scan)
 
     def _set_bit_rate(self, params: bytes) -> bytes:
         """SS on a serial link: 01 not a number, 02 not a rate the unit has, 03 the rate it has already."""

@@ -431,3 +431,17 @@ def test_the_lines_encoded_ahead_are_the_ones_sent():
     device._encode_data = lambda *args: encoded.append(args) or original(*args)  # type: ignore[method-assign]
     [message] = [o.data for o in device.poll(device.next_deadline())]
     assert encoded == [] and b"ME0000108000000" in message
+
+
+def test_a_scan_prepared_twice_before_its_deadline_is_encoded_once():
+    """A reply delivered between two scans makes the daemon offer the same next scan again: no second encoding."""
+    source = _varying_scans()
+    device = Scip22Device(source, "ust-10lx")
+    device.receive(b"ME0000108000000\n", 0.0)
+    device.poll(device.next_deadline())
+    encoded = []
+    original = device._encode_data
+    device._encode_data = lambda *args: encoded.append(args) or original(*args)  # type: ignore[method-assign]
+    device.prepare_next(source)
+    device.prepare_next(source)
+    assert len(encoded) == 1
