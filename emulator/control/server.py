@@ -36,10 +36,17 @@ from emulator.scene.live import ClockChange, LiveEvent
 
 MAX_BODY_BYTES = 64 * 1024
 POSE_STREAM_HZ = 20.0  # `{"type": "poses"}` messages a second while a live body moves
+# `{"type": "state"}` messages a second at most: a 125 Hz twist stream would otherwise cost the loop a
+# state (~1 ms) per twist; the changes in between share one message, which carries the latest state.
+STATE_MESSAGE_HZ = 20.0
 CLIENT_QUEUE_MESSAGES = 32  # outgoing messages a WebSocket client may fall behind by before it is dropped
 # The kernel's send buffer of a WebSocket client: what a client that stops reading can hold
 # besides its queue (loopback autotuning would let it grow to megabytes).
 CLIENT_SEND_BUFFER_BYTES = 256 * 1024
+# What stopping the daemon waits for its WebSocket clients' close handshakes and for the requests under
+# way; then they are reset. A client that never answers (or has a backlog of messages queued before its
+# close) must not hold the daemon's exit.
+CLOSE_TIMEOUT_S = 1.0
 DEFAULT_ADDRESS = "127.0.0.1:8765"
 
 log = logging.getLogger(__name__)
@@ -101,6 +108,7 @@ class ControlServer:
         self.feed = ScanFeed(session.daemon, self._serializer, self._clock_changed)
         self._clients: set[_Client] = set()
         self._state_pending = False
+        self._state_sent_at = -float("inf")  # the loop's time of the last state message
         self._runner: web.AppRunner | None = None
         self._unlisten = session.listen(self._changed)
         self._pose_stream: asyncio.Task | None = None
@@ -118,7 +126,7 @@ class ControlServer:
         app.router.add_patch("/api/clock", self._change_handler("clock"))
         app.router.add_get("/api/sensors/{name}/scan", self._scan)
         app.router.add_get("/api/ws", self._websocket)
-        self._runner = web.AppRunner(app, access_log=None, handle_signals=False)
+        self._runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=CLOSE_TIMEOUT_S)
         await self._runner.setup()
         site = web.TCPSite(self._runner, self.address.host, self.address.port, reuse_address=True)
         try:
@@ -142,8 +150,11 @@ class ControlServer:
         if self._pose_stream is not None:
             self._pose_stream.cancel()
         self.feed.close()
-        for client in list(self._clients):
-            await client.close()
+        clients = list(self._clients)
+        if clients:
+            await asyncio.wait([asyncio.ensure_future(client.close()) for client in clients], timeout=CLOSE_TIMEOUT_S)
+        for client in clients:
+            client.reset()
         if self._runner is not None:
             await self._runner.cleanup()
         self._serializer.shutdown(wait=False, cancel_futures=True)
@@ -272,12 +283,14 @@ class ControlServer:
     def _changed(self, event: LiveEvent) -> None:
         if isinstance(event, ClockChange):
             self._clock_changed.set()
-        if not self._state_pending and self._clients:  # changes made in one loop turn share one message
+        if not self._state_pending and self._clients:  # changes until the message is sent share it
             self._state_pending = True
-            asyncio.get_running_loop().call_soon(self._send_state)
+            loop = asyncio.get_running_loop()
+            loop.call_at(max(loop.time(), self._state_sent_at + 1.0 / STATE_MESSAGE_HZ), self._send_state)
 
     def _send_state(self) -> None:
         self._state_pending = False
+        self._state_sent_at = asyncio.get_running_loop().time()
         message = self._state_message()
         for client in list(self._clients):
             client.offer(message)
@@ -324,12 +337,16 @@ class _Client:
             log.info("control: a WebSocket client stopped reading; dropped")
             self.dropped = True
             self._on_drop(self)
-            self._writer.cancel()
-            if self._transport is not None:
-                connection = self._transport.get_extra_info("socket")
-                if connection is not None:  # reset, discarding what the kernel still holds for it
-                    connection.setsockopt(SOL_SOCKET, SO_LINGER, struct.pack("ii", 1, 0))
-                self._transport.abort()
+            self.reset()
+
+    def reset(self) -> None:
+        """The connection reset at once, discarding what the kernel still holds for it either way."""
+        self._writer.cancel()
+        if self._transport is not None and not self._transport.is_closing():
+            connection = self._transport.get_extra_info("socket")
+            if connection is not None:
+                connection.setsockopt(SOL_SOCKET, SO_LINGER, struct.pack("ii", 1, 0))
+            self._transport.abort()
 
     async def _write(self) -> None:
         try:

@@ -147,6 +147,37 @@ def test_a_slow_websocket_client_is_dropped_and_others_keep_their_scans(daemon: 
     assert call(url, "GET", "/api/state")[0] == 200
 
 
+def test_state_messages_come_at_most_20_a_second_and_carry_the_latest_change(daemon: ServeProcess) -> None:
+    """200 region changes over 1 s on one connection (each answered in a state message, they would cost
+    the loop a state each): the client gets at most 20 state messages a second, and the last one it gets
+    holds the last change."""
+    url = daemon.control_url
+
+    async def change() -> tuple[list[float], dict]:
+        async with aiohttp.ClientSession() as http, http.ws_connect(url + "/api/ws") as ws:
+            assert json.loads((await ws.receive(timeout=5)).data)["type"] == "state"  # the one on connecting
+            arrivals, last = [], {}
+            start = time.monotonic()
+            for sent in range(1, 201):
+                await ws.send_json({"op": "region", "name": "room", "density": sent / 10_000})
+                while (wait := start + sent / 200 - time.monotonic()) > 0 or sent == 200:
+                    try:
+                        message = await ws.receive(timeout=max(wait, 0.3 if sent == 200 else 0.0))
+                    except asyncio.TimeoutError:
+                        break
+                    data = json.loads(message.data)
+                    assert data["type"] == "state", data
+                    arrivals.append(time.monotonic() - start)
+                    last = data
+            return arrivals, last
+
+    arrivals, last = asyncio.run(change())
+    assert last["regions"]["room"]["density"] == 0.02, last["regions"]
+    spans = np.array(arrivals)
+    busiest = int((np.searchsorted(spans, spans + 1.0) - np.arange(len(spans))).max())  # in any 1 s
+    assert 2 <= busiest <= 20 + 1, (busiest, len(arrivals))  # +1: a client may read two in one wake-up
+
+
 def test_the_token_rule(room: Path) -> None:
     result = subprocess.run(
         [*serve_command(), "serve", str(room), "--endpoint", ENDPOINTS[0], "--control", "0.0.0.0:0"],
