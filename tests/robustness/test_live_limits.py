@@ -18,7 +18,8 @@ import subprocess
 import time
 import urllib.error
 import urllib.request
-from concurrent.futures import ThreadPoolExecutor
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import aiohttp
@@ -201,62 +202,78 @@ def test_an_event_log_over_a_limit_is_refused_at_load(tmp_path: Path) -> None:
         assert "session.jsonl: line 2" in errors[0] and "particle budget" in errors[0], (name, errors[0])
 
 
+TWIST = {"vx": 1.0, "wz": 0.0}  # at the body's max_speed: soon pushing into a wall
+
+
+async def _flood_websocket(url: str, flood_s: float) -> tuple[int, list[dict]]:
+    """Twists at up to 5 kHz (40 times the rate), reading the answers meanwhile; at the end the close
+    handshake is not waited for (the daemon reads what is still queued on its own pace)."""
+    sent, errors = 0, []
+    close = aiohttp.ClientWSTimeout(ws_close=0.5)
+    async with aiohttp.ClientSession() as http, http.ws_connect(url + "/api/ws", timeout=close) as ws:
+        async def read() -> None:
+            async for message in ws:
+                data = json.loads(message.data)
+                if data["type"] == "error":
+                    errors.append(data)
+
+        reader = asyncio.create_task(read())
+        end = time.monotonic() + flood_s
+        while time.monotonic() < end:
+            await ws.send_json({"op": "twist", "name": "robot", **TWIST})
+            sent += 1
+            if sent % 50 == 0:
+                await asyncio.sleep(0.01)  # and let the reader keep up
+        reader.cancel()
+    return sent, errors
+
+
+async def _flood_put(url: str, flood_s: float) -> tuple[int, list[dict]]:
+    """Twists over HTTP, one after another on a keep-alive connection."""
+    sent, refusals = 0, []
+    async with aiohttp.ClientSession() as http:
+        end = time.monotonic() + flood_s
+        while time.monotonic() < end:
+            async with http.put(url + "/api/bodies/robot/twist", json=TWIST) as answer:
+                sent += 1
+                if answer.status == 429:
+                    refusals.append(await answer.json())
+                else:
+                    assert answer.status == 200, await answer.text()
+    return sent, refusals
+
+
+def _started(pause_s: float) -> int:
+    """A client process up, this module imported in it: its pid."""
+    time.sleep(pause_s)
+    return os.getpid()
+
+
+def flood(client: str, url: str, flood_s: float) -> tuple[int, list[dict]]:
+    """One flooding client, run in a process of its own (as a client is): its CPU is the machine's,
+    but it does not hold the reading test's interpreter lock."""
+    return asyncio.run({"websocket": _flood_websocket, "put": _flood_put}[client](url, flood_s))
+
+
 def test_a_twist_flood_is_held_to_the_rate_and_another_clients_scans_stay_on_time() -> None:
     """rescue-live's robot driven by a WebSocket client sending twists as fast as it can and an HTTP client
     doing the same (each applied twist costs the loop 0.3–1.5 ms, more pushing into a wall; unpaced,
     40 000 refused WebSocket messages a second took a core and the URG fell silent for 0.9 s): beyond the
     per-body rate they are refused (429, an error message naming the limit), no second of simulated time
     gets more twists than the rate plus the burst, and the URG's MD stream, another client's, keeps coming."""
-    twist = {"vx": 1.0, "wz": 0.0}  # at the body's max_speed: soon pushing into a wall
     flood_s = 3.0 * SCALE
 
-    async def websocket(url: str, errors: list[dict]) -> int:
-        """Twists at up to 5 kHz (40 times the rate), reading the answers meanwhile; at the end the close
-        handshake is not waited for (the daemon reads what is still queued on its own pace)."""
-        sent = 0
-        close = aiohttp.ClientWSTimeout(ws_close=0.5)
-        async with aiohttp.ClientSession() as http, http.ws_connect(url + "/api/ws", timeout=close) as ws:
-            async def read() -> None:
-                async for message in ws:
-                    data = json.loads(message.data)
-                    if data["type"] == "error":
-                        errors.append(data)
-
-            reader = asyncio.create_task(read())
-            end = time.monotonic() + flood_s
-            while time.monotonic() < end:
-                await ws.send_json({"op": "twist", "name": "robot", **twist})
-                sent += 1
-                if sent % 50 == 0:
-                    await asyncio.sleep(0.01)  # and let the reader keep up
-            reader.cancel()
-        return sent
-
-    async def put(url: str, refusals: list[dict]) -> int:
-        """Twists over HTTP, one after another on a keep-alive connection."""
-        sent = 0
-        async with aiohttp.ClientSession() as http:
-            end = time.monotonic() + flood_s
-            while time.monotonic() < end:
-                async with http.put(url + "/api/bodies/robot/twist", json=twist) as answer:
-                    sent += 1
-                    if answer.status == 429:
-                        refusals.append(await answer.json())
-                    else:
-                        assert answer.status == 200, await answer.text()
-        return sent
-
-    with ServeProcess("rescue-live", ["urg=tcp:127.0.0.1:0"]) as served:
+    spawn = multiprocessing.get_context("spawn")
+    with ServeProcess("rescue-live", ["urg=tcp:127.0.0.1:0"]) as served, ProcessPoolExecutor(2, mp_context=spawn) as clients:
+        started = [clients.submit(_started, 0.3) for _ in range(2)]  # both up before the flood
+        assert len({future.result() for future in started}) == 2
         url = served.control_url
         stream = UrgStream(served.endpoint("urg", "tcp").address)
-        errors: list[dict] = []
-        refusals: list[dict] = []
         try:
             stream.read_for(1.0)
-            with ThreadPoolExecutor(2) as clients:  # each flooding client on its own thread and loop
-                sent = [clients.submit(asyncio.run, websocket(url, errors)), clients.submit(asyncio.run, put(url, refusals))]
-                during = stream.read_for(flood_s)
-                ws_sent, put_sent = (future.result() for future in sent)
+            sent = [clients.submit(flood, client, url, flood_s) for client in ("websocket", "put")]
+            during = stream.read_for(flood_s)
+            (ws_sent, errors), (put_sent, refusals) = (future.result() for future in sent)
         finally:
             stream.close()
         with urllib.request.urlopen(url + "/api/events", timeout=10) as answer:
@@ -270,5 +287,31 @@ def test_a_twist_flood_is_held_to_the_rate_and_another_clients_scans_stay_on_tim
     busiest = int((np.searchsorted(stamps, stamps + 1.0) - np.arange(len(stamps))).max())  # in any 1 s of the clock
     assert busiest <= TWIST_RATE_HZ + TWIST_BURST, busiest
     expected = flood_s / URG_PERIOD_S
+
     assert len(during) >= 0.7 * expected, f"{len(during)} scans of {expected:.0f} (load average {load:.1f})"
     assert longest_gap_s(during) < 1.0, f"the sensor went silent for {longest_gap_s(during):.2f} s (load average {load:.1f})"
+
+
+@pytest.mark.parametrize("then", ["stays", "closes"])
+def test_a_websocket_client_with_a_backlog_of_twists_does_not_hold_the_daemon_at_shutdown(then: str) -> None:
+    """A client that sent 5000 twists at once (the daemon reads them at the rate, one every 8 ms: 40 s of
+    them) and then stays without reading, or closes its socket without a close handshake. SIGTERM still
+    ends the daemon within its stop timeout: stopping waits at most CLOSE_TIMEOUT_S for a client's
+    handshake, then resets the connection."""
+    with ServeProcess("rescue-live", ["urg=tcp:127.0.0.1:0"]) as served:
+        port = int(served.control_url.rsplit(":", 1)[1])
+        flooder = socket.create_connection(("127.0.0.1", port))
+        flooder.sendall(
+            b"GET /api/ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+            b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n"
+        )
+        twist = json.dumps({"op": "twist", "name": "robot", "vx": 0.1, "wz": 0.0}).encode()
+        frame = bytes([0x81, 0x80 | len(twist)]) + b"\x00\x00\x00\x00" + twist  # masked text frames
+        flooder.sendall(frame * 5000)
+        if then == "closes":
+            flooder.close()
+        time.sleep(0.5)  # some of them refused and paced meanwhile
+        try:
+            assert served.stop(timeout_s=10.0) == 0, served.stderr
+        finally:
+            flooder.close()
