@@ -33,6 +33,7 @@ from protocols.cola.values import (
     flex,
     i16,
     i32,
+    prepare_tables,
     u8,
     u16,
     u32,
@@ -212,6 +213,7 @@ class ColaDevice:
     def __init__(self, scan_source: ScanSource, unit: ColaUnit) -> None:
         self._scans = scan_source
         self.unit = unit
+        prepare_tables()  # not at the first scan's deadline
         self._reader = ColaReader()
         self._session = _Session()
         self._handlers: dict[tuple[bytes, bytes], tuple[bytes, Handler]] = {

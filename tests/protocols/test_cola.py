@@ -9,6 +9,9 @@ protocols.cola.values.
 from __future__ import annotations
 
 import struct
+import subprocess
+import sys
+from pathlib import Path
 from dataclasses import dataclass
 
 import numpy as np
@@ -151,6 +154,20 @@ def test_settings_outlive_the_connection_until_reboot():
 
 
 # -- framing -----------------------------------------------------------------------
+
+
+def test_a_new_device_builds_the_token_table_so_the_first_scan_telegram_does_not():
+    """The u16 token table costs 15-70 ms to build: a device builds it when made (a fresh interpreter,
+    where nothing built it yet), not when the first `sRN LMDscandata` is due."""
+    program = (
+        "import protocols.cola.values as values\n"
+        "from tests.protocols.test_cola import device\n"
+        "assert values._U16_TOKENS is None\n"
+        "device()\n"
+        "assert values._U16_TOKENS is not None\n"
+    )
+    result = subprocess.run([sys.executable, "-c", program], cwd=Path(__file__).parents[2], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr[-2000:]
 
 
 def test_framing_edge_cases():
