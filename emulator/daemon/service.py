@@ -611,8 +611,10 @@ class Daemon:
             self.pool.apply(records + [{"op": "prune", "t": horizon}] if prune else records)  # queued before the scans submitted below
         elif self.world is None:
             self._before_workers.append(event)
-        for scans in self.scan_caches.values():
-            scans.invalidate_from(event.time_s)
+        changed_from_s = self.live.changed_from_s  # a repeated twist changes the path from the old stop on
+        if changed_from_s != float("inf"):
+            for scans in self.scan_caches.values():
+                scans.invalidate_from(changed_from_s)
         return event
 
     def clients(self, sensor: str) -> int:

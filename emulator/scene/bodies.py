@@ -16,6 +16,10 @@ one vectorised pass (no per-beam Python).
   the body's ordered event list (times must not decrease): a pose, and the
   velocity (vx, vy, wz) that moves it from there until `until_s` (zero for a
   pose; for a twist, when its watchdog or a solid stops it: scene/obstacles.py).
+  The same twist again while the last one still moves the body (a cmd_vel
+  bridge repeating it) moves that event's `until_s` on instead: the path up
+  to the old stop stays the very same, bit for bit, and what was computed
+  for those instants stays valid.
   `live_frames(times, events, initial)` is the pure function that turns that
   list into poses: from each event's time until the next event's, its pose
   moved along its twist's closed-form arc (scene/drive.py) for the time
@@ -343,13 +347,15 @@ class _EventLog:
         self._lock = threading.Lock()
         self._count = 0
         self._arrays = {name: np.zeros((16, *shape)) for name, shape in self._COLUMNS.items()}
+        self.last_time_s = float("-inf")  # the latest event taken (a merged twist's, not its row's start)
 
     def append(self, time_s: float, position: np.ndarray, quaternion: np.ndarray,
                twist: np.ndarray | None = None, until_s: float | None = None) -> None:
         with self._lock:
             times = self._arrays["times"]
-            if self._count and time_s < times[self._count - 1]:
-                raise ValueError(f"live pose at {time_s} s is earlier than the last one ({times[self._count - 1]} s)")
+            if time_s < self.last_time_s:
+                raise ValueError(f"live pose at {time_s} s is earlier than the last one ({self.last_time_s} s)")
+            self.last_time_s = float(time_s)
             if self._count == len(times):  # grow into new arrays: earlier snapshots keep the old ones
                 self._arrays = {name: np.concatenate([array, np.zeros_like(array)]) for name, array in self._arrays.items()}
             row = {"times": time_s, "positions": position, "quaternions": quaternion, "twists": 0.0 if twist is None else twist,
@@ -357,6 +363,26 @@ class _EventLog:
             for name, value in row.items():
                 self._arrays[name][self._count] = value
             self._count += 1
+
+    def continue_twist(self, time_s: float, twist: np.ndarray, until_s: float) -> float | None:
+        """The same twist again while the last one still moves the body: its row moves on until
+        `until_s` instead of a new row starting from where the body is (the path up to the old stop is
+        the very same, to the last bit, so nothing computed before it changes). The instant from which
+        the body's path changed (inf: not at all), or None if this is not such a twist."""
+        with self._lock:
+            last = self._count - 1
+            if last < 0 or time_s < self.last_time_s:
+                return None
+            row_until = float(self._arrays["until"][last])
+            if not (self._arrays["times"][last] <= time_s < row_until) or not np.array_equal(self._arrays["twists"][last], twist):
+                return None
+            self.last_time_s = float(time_s)
+            if until_s == row_until:
+                return float("inf")
+            until = self._arrays["until"].copy()  # earlier snapshots keep the old column
+            until[last] = until_s
+            self._arrays = {**self._arrays, "until": until}
+            return min(row_until, float(until_s))
 
     def prune(self, horizon_s: float) -> None:
         """Forget the events before the one holding at `horizon_s`, once they are half of those held
@@ -377,6 +403,7 @@ class _EventLog:
             self._count = len(events.times)
             self._arrays = {name: np.concatenate([getattr(events, name), np.zeros((max(16, self._count), *shape))])
                             for name, shape in self._COLUMNS.items()}
+            self.last_time_s = float(events.times[-1]) if self._count else float("-inf")
 
     def snapshot(self) -> LiveEvents:
         with self._lock:
@@ -424,10 +451,22 @@ class BodyPoses:
             raise KeyError(f"no live body named {name!r} (live: {', '.join(self._live) or 'none'})")
         self._live[name].append(float(time_s), np.asarray(pose.position, dtype=float), euler_quaternion(pose.rotation_deg))
 
-    def add_live_twist(self, name: str, time_s: float, twist: Twist, until_s: float) -> None:
-        """Record that live body `name` moves by `twist` from where it is at `time_s` until `until_s`."""
+    def add_live_twist(self, name: str, time_s: float, twist: Twist, until_s: float) -> float:
+        """Record that live body `name` moves by `twist` from where it is at `time_s` until `until_s`;
+        the instant from which its path changed (inf: not at all). A cmd_vel bridge repeats the same
+        twist 10-100 times a second: each repeat only moves the stop on, so the scans computed for
+        the instants before the old stop stay valid."""
+        log, velocity = self._live_log(name), np.array([twist.vx, twist.vy, twist.wz])
+        changed_from = log.continue_twist(float(time_s), velocity, float(until_s))
+        if changed_from is not None:
+            return changed_from
         position, quaternion = self.live_pose(name, time_s)
-        self._live_log(name).append(float(time_s), position, quaternion, np.array([twist.vx, twist.vy, twist.wz]), float(until_s))
+        log.append(float(time_s), position, quaternion, velocity, float(until_s))
+        return float(time_s)
+
+    def last_event_s(self, name: str) -> float:
+        """The instant of live body `name`'s latest pose or twist (-inf before any)."""
+        return self._live_log(name).last_time_s
 
     def live_pose(self, name: str, time_s: float) -> tuple[np.ndarray, np.ndarray]:
         """Live body `name`'s position (3,) and quaternion (4,) at `time_s`, from its events so far."""

@@ -198,6 +198,8 @@ class LiveState:
             plume.name: None for plume in scene.plumes}
         self._plume_by_name = {plume.name: plume for plume in scene.plumes}
         self.horizon = float("-inf")  # no instant before it is kept (`prune`)
+        # from which instant the world changed by the last change applied (inf: it changed nothing)
+        self.changed_from_s = float("inf")
 
     def apply(self, event: WorldEvent) -> WorldEvent:
         """Take `event` into account from its instant on (validated by the caller: names exist); the
@@ -209,12 +211,13 @@ class LiveState:
     def _apply(self, event: WorldEvent) -> WorldEvent:
         if event.time_s < self.horizon:
             raise ValueError(f"live {event.op} at {event.time_s} s is before the kept history's horizon ({self.horizon} s)")
+        self.changed_from_s = event.time_s
         if isinstance(event, (PoseChange, TwistChange)):
             if isinstance(event, PoseChange):
                 self.bodies.add_live_pose(event.name, event.time_s, event.pose)
             else:
                 event = self.resolved(event)
-                self.bodies.add_live_twist(event.name, event.time_s, event.twist, event.until_s)
+                self.changed_from_s = self.bodies.add_live_twist(event.name, event.time_s, event.twist, event.until_s)
             with self._lock:
                 self.generation += 1
             return event
@@ -305,9 +308,9 @@ class LiveState:
         ValueError when it is stamped before the body's last event."""
         if event.until_s is not None:
             return event
-        last = self.bodies.live_events(event.name).times
-        if len(last) and event.time_s < last[-1]:
-            raise ValueError(f"live twist at {event.time_s} s is earlier than the body's last event ({last[-1]} s)")
+        last_s = self.bodies.last_event_s(event.name)
+        if event.time_s < last_s:
+            raise ValueError(f"live twist at {event.time_s} s is earlier than the body's last event ({last_s} s)")
         drive = self.bodies.body(event.name).drive
         position, quaternion = self.bodies.live_pose(event.name, event.time_s)
         twist = np.array([event.twist.vx, event.twist.vy, event.twist.wz])

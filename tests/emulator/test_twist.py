@@ -21,6 +21,7 @@ import json
 import math
 import subprocess
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import aiohttp
@@ -39,6 +40,7 @@ from emulator.control.events import ControlError, EventWriter, read_events, worl
 from emulator.control.server import ControlAddress, ControlServer
 from emulator.control.session import LiveSession
 from emulator.daemon.clock import ManualClock
+from emulator.daemon.scan_cache import ScanCache
 from emulator.daemon.service import Daemon
 from emulator.errors import SceneError
 from emulator.optics.world import World
@@ -545,3 +547,57 @@ def test_foxglove_live_publishes_the_driven_robot_on_tf(tmp_path: Path) -> None:
                     transforms = decode(frame[13:]).transforms
                     xs += [t.translation.x for t in transforms if t.child_frame_id == "robot"]
     assert len(set(xs)) >= 4 and xs[-1] > xs[0] >= 5.0, xs  # east from (5, 1.75), frame after frame
+
+
+# --------------------------------------------------------------------------- a repeated twist
+
+
+def test_a_repeated_twist_moves_the_stop_on_and_keeps_the_path_before_it_bit_for_bit() -> None:
+    """A cmd_vel bridge sends the same twist 10-100 times a second: each repeat while the body still
+    moves only moves its stop on (the same path, to the last bit, up to the old stop); a twist that
+    differs, or one after the body stopped, starts from where the body is."""
+    live = LiveState(load_scene(SCENE))
+    twist = Twist(0.6, 0.0, 0.4)
+    live.apply(TwistChange(2.0, "robot", twist))
+    assert live.changed_from_s == 2.0
+    times = np.linspace(2.0, 3.5, 61)
+    before = live.bodies.frames("robot", times)
+    live.apply(TwistChange(2.3, "robot", twist))
+    assert live.changed_from_s == 2.0 + WATCHDOG_S  # the old stop
+    after = live.bodies.frames("robot", times)
+    kept = times <= 2.0 + WATCHDOG_S
+    np.testing.assert_array_equal(after.positions[kept], before.positions[kept])
+    np.testing.assert_array_equal(after.rotations[kept], before.rotations[kept])
+    expected = integrate((5.0, 1.75, 0.0), [(2.0, 0.6, 0.0, 0.4), (2.3, 0.6, 0.0, 0.4)], 3.5)
+    for t in (2.6, 2.7, 2.8, 3.0):  # on along the same arc, up to the new watchdog (2.8 s), then standing
+        position = after.positions[np.isclose(times, t)][0]
+        np.testing.assert_allclose(position[:2], expected(t)[:2], atol=1e-6, err_msg=f"at {t}")
+    assert len(live.bodies.live_events("robot").times) == 1  # one row, its stop moved on
+    live.apply(TwistChange(2.3, "robot", twist))  # the same again at the same instant: the same stop
+    assert live.changed_from_s == math.inf
+    live.apply(TwistChange(2.4, "robot", Twist(0.3, 0.0, 0.0)))  # another twist: from now
+    assert live.changed_from_s == 2.4 and len(live.bodies.live_events("robot").times) == 2
+    live.apply(TwistChange(5.0, "robot", Twist(0.3, 0.0, 0.0)))  # the same, but the body had stopped
+    assert live.changed_from_s == 5.0 and len(live.bodies.live_events("robot").times) == 3
+    with pytest.raises(ValueError, match="earlier than the body's last event"):
+        live.apply(TwistChange(4.0, "robot", Twist(0.3, 0.0, 0.0)))
+
+
+def test_a_repeated_twist_keeps_the_scans_computed_before_the_old_stop() -> None:
+    """The daemon drops only the scans from the instant the path changed: a cmd_vel stream repeating
+    one twist leaves the scans foreseen before the old stop in the cache (not computed again per twist)."""
+    scene = load_scene(SCENE)
+    daemon = Daemon(scene, clock=ManualClock(), workers=0)
+    try:
+        urg = next(spec for spec in scene.sensors if spec.model == "urg-04lx")
+        with ThreadPoolExecutor(1) as executor:
+            cache = daemon.scan_caches[urg.name] = ScanCache(create_sensor(scene, urg.name, daemon.world), executor)
+            daemon.apply(TwistChange(2.0, "robot", Twist(0.6, 0.0, 0.0)))
+            instants = [2.1, 2.3, 2.45, 2.6, 2.8]
+            futures = {t: cache.request(t) for t in instants}
+            daemon.apply(TwistChange(2.2, "robot", Twist(0.6, 0.0, 0.0)))  # the stop moves from 2.5 to 2.7
+            assert [cache.holds(t, futures[t]) for t in instants] == [True, True, True, False, False]
+            daemon.apply(TwistChange(2.25, "robot", Twist(0.6, 0.0, 0.3)))  # another twist: from 2.25 on
+            assert [cache.holds(t, futures[t]) for t in instants] == [True, False, False, False, False]
+    finally:
+        daemon.close()
