@@ -19,7 +19,8 @@ one vectorised pass (no per-beam Python).
   The same twist again while the last one still moves the body (a cmd_vel
   bridge repeating it) moves that event's `until_s` on instead: the path up
   to the old stop stays the very same, bit for bit, and what was computed
-  for those instants stays valid.
+  for those instants stays valid. A twist that cannot move a standing body
+  (zero, or pushing against the solid that stopped it) adds no event.
   `live_frames(times, events, initial)` is the pure function that turns that
   list into poses: from each event's time until the next event's, its pose
   moved along its twist's closed-form arc (scene/drive.py) for the time
@@ -384,6 +385,15 @@ class _EventLog:
             self._arrays = {**self._arrays, "until": until}
             return min(row_until, float(until_s))
 
+    def keep_standing(self, time_s: float) -> bool:
+        """Whether the body already stands at `time_s` (a twist that cannot move it then changes
+        nothing: pushing against the solid that stopped it); if so, `time_s` is taken as an event's."""
+        with self._lock:
+            if time_s < self.last_time_s or (self._count and self._arrays["until"][self._count - 1] > time_s):
+                return False
+            self.last_time_s = float(time_s)
+            return True
+
     def prune(self, horizon_s: float) -> None:
         """Forget the events before the one holding at `horizon_s`, once they are half of those held
         (amortised O(1) per event; earlier snapshots keep the old arrays)."""
@@ -460,6 +470,8 @@ class BodyPoses:
         changed_from = log.continue_twist(float(time_s), velocity, float(until_s))
         if changed_from is not None:
             return changed_from
+        if (until_s <= time_s or not velocity.any()) and log.keep_standing(float(time_s)):
+            return float("inf")  # it stands, and this twist cannot move it (a solid, or zero)
         position, quaternion = self.live_pose(name, time_s)
         log.append(float(time_s), position, quaternion, velocity, float(until_s))
         return float(time_s)

@@ -48,7 +48,7 @@ from typing import Any
 
 import numpy as np
 from emulator.scene.bodies import BodyPoses
-from emulator.scene.drive import Twist
+from emulator.scene.drive import Drive, Twist
 from emulator.scene.obstacles import Obstacles
 from emulator.scene.model import Plume, Pose, Scene, Vec3
 from emulator.scene.plumes import EmissionSegment, scene_emission
@@ -312,10 +312,31 @@ class LiveState:
         if event.time_s < last_s:
             raise ValueError(f"live twist at {event.time_s} s is earlier than the body's last event ({last_s} s)")
         drive = self.bodies.body(event.name).drive
-        position, quaternion = self.bodies.live_pose(event.name, event.time_s)
         twist = np.array([event.twist.vx, event.twist.vy, event.twist.wz])
+        until_s = self._continued_until(event, drive, twist, last_s)
+        if until_s is not None:
+            return dataclasses.replace(event, until_s=until_s)
+        position, quaternion = self.bodies.live_pose(event.name, event.time_s)
         moving_s = self.obstacles.travel_time(drive, position, quaternion, twist, drive.watchdog_s)
         return dataclasses.replace(event, until_s=event.time_s + moving_s)
+
+    def _continued_until(self, event: TwistChange, drive: Drive, twist: np.ndarray, last_s: float) -> float | None:
+        """Where the same twist again, while the last one still moves the body, stops (None if it is not
+        such a twist). Its path up to the old stop was searched already: a stop short of the last
+        twist's watchdog was a solid, which the same path meets at the same instant; otherwise only
+        the path on from the old stop is searched, up to this twist's watchdog."""
+        events = self.bodies.live_events(event.name)
+        if not len(events.times) or not (events.times[-1] <= event.time_s < events.until[-1]):
+            return None
+        if not np.array_equal(events.twists[-1], twist):
+            return None
+        old_until = float(events.until[-1])
+        if old_until != last_s + drive.watchdog_s:
+            return old_until  # stopped by a solid
+        remaining_s = event.time_s + drive.watchdog_s - old_until
+        position, quaternion = self.bodies.live_pose(event.name, old_until)
+        moving_s = self.obstacles.travel_time(drive, position, quaternion, twist, remaining_s)
+        return event.time_s + drive.watchdog_s if moving_s >= remaining_s else old_until + moving_s
 
     @functools.cached_property
     def obstacles(self) -> Obstacles:

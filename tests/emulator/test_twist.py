@@ -47,7 +47,8 @@ from emulator.optics.world import World
 from emulator.scene import load_scene
 from emulator.scene.drive import Twist, planar_motion
 from emulator.scene.bodies import euler_quaternion
-from emulator.scene.live import LiveState, TwistChange, event_from_record, event_record
+from emulator.scene.live import LiveState, PoseChange, TwistChange, event_from_record, event_record
+from emulator.scene.model import Pose
 from emulator.scene.obstacles import Obstacles
 from emulator.sensors import create_sensor
 from emulator.sensors.scan_json import scan_json
@@ -581,6 +582,17 @@ def test_a_repeated_twist_moves_the_stop_on_and_keeps_the_path_before_it_bit_for
     assert live.changed_from_s == 5.0 and len(live.bodies.live_events("robot").times) == 3
     with pytest.raises(ValueError, match="earlier than the body's last event"):
         live.apply(TwistChange(4.0, "robot", Twist(0.3, 0.0, 0.0)))
+    standing = live.bodies.frames("robot", np.array([6.0, 9.0])).positions
+    for t in (6.0, 6.01, 6.02):  # zero twists to a body that stands (an idle bridge): nothing changes
+        live.apply(TwistChange(t, "robot", Twist()))
+        assert live.changed_from_s == math.inf
+    assert len(live.bodies.live_events("robot").times) == 3
+    np.testing.assert_array_equal(live.bodies.frames("robot", np.array([6.0, 9.0])).positions, standing)
+    with pytest.raises(ValueError, match="earlier than the body's last event"):
+        live.apply(TwistChange(6.015, "robot", Twist(0.3, 0.0, 0.0)))  # its instant was taken all the same
+    live.apply(TwistChange(6.03, "robot", Twist(0.3, 0.0, 0.0)))
+    live.apply(TwistChange(6.05, "robot", Twist()))  # a zero twist to a moving body stops it: from now
+    assert live.changed_from_s == 6.05
 
 
 def test_a_repeated_twist_keeps_the_scans_computed_before_the_old_stop() -> None:
@@ -601,3 +613,31 @@ def test_a_repeated_twist_keeps_the_scans_computed_before_the_old_stop() -> None
             assert [cache.holds(t, futures[t]) for t in instants] == [True, False, False, False, False]
     finally:
         daemon.close()
+
+
+def test_a_100_hz_stream_of_one_twist_keeps_the_body_moving_and_stops_it_a_watchdog_after_the_last() -> None:
+    """Each repeat only searches the path on from the old stop: the body still follows the arc of the
+    stream (an independent integration of every command), into free space and then up to a wall."""
+    live = LiveState(load_scene(SCENE))
+    live.apply(PoseChange(1.0, "robot", Pose((5.0, 1.75, 0.0), (0.0, 0.0, -90.0))))  # facing the south wall, y = 0
+    commands = [(1.0 + k / 100, 0.6, 0.0, 0.05) for k in range(150)]  # 1.5 s at 100 Hz
+    for t, vx, vy, wz in commands:
+        live.apply(TwistChange(t, "robot", Twist(vx, vy, wz)))
+    events = live.bodies.live_events("robot")
+    assert len(events.times) == 2 and events.until[-1] == commands[-1][0] + WATCHDOG_S  # one row, moved on
+    expected = integrate((5.0, 1.75, math.radians(-90.0)), commands, 4.0)
+    times = np.array([1.5, 2.0, 2.49, 2.9, 3.5])
+    positions = live.bodies.frames("robot", times).positions
+    for t, position in zip(times, positions):
+        np.testing.assert_allclose(position[:2], expected(t)[:2], atol=1e-6, err_msg=f"at {t}")
+    live.apply(TwistChange(3.0, "robot", Twist(0.6, 0.0, 0.05)))  # stopped at the watchdog: from here
+    assert live.changed_from_s == 3.0
+    for k in range(1, 400):  # on at 100 Hz until the wall stops it: contact, then the same stop
+        live.apply(TwistChange(3.0 + k / 100, "robot", Twist(0.6, 0.0, 0.05)))
+    until = float(live.bodies.live_events("robot").until[-1])
+    assert until < 6.0 and live.changed_from_s == math.inf  # the stop is a contact, and stays
+    stop = live.bodies.frames("robot", np.array([until, 7.0])).positions
+    drive = live.bodies.body("robot").drive
+    near = live.obstacles.outlines(stop[0][2] + drive.clearance, stop[0][2] + drive.height)
+    np.testing.assert_array_equal(stop[0], stop[1])
+    assert RADIUS - 1e-6 <= float(near.clearance(stop[:1, :2])[0]) <= RADIUS + 1e-3  # touching, not inside
