@@ -45,6 +45,16 @@ class Grabbed:
     returncode: int
     output: str
 
+    def scans(self, label: str) -> ExportedScans:
+        """`export_2d_scans` of the log; when it fails, the error also holds what rawlog-grabber
+        printed (its driver's own account of why it saved nothing)."""
+        if self.rawlog is None:
+            raise MrptError(f"rawlog-grabber left no single log (exit {self.returncode}):\n{self.output[-3000:]}")
+        try:
+            return export_2d_scans(self.rawlog, label)
+        except MrptError as error:
+            raise MrptError(f"{error}\nrawlog-grabber said:\n{self.output[-3000:]}") from None
+
 
 def grab(
     folder: Path, section: str, *, until: Callable[[int], bool], timeout_s: float, kill: bool = False

@@ -46,7 +46,7 @@ def _grab(serve, folder: Path, model: str, driver: str, scans: int, timeout_s: f
                f"ip_address = 127.0.0.1\nTCP_port = {port}\n")
     grabbed = mrpt.grab(folder, section, until=lambda saved: saved >= scans, timeout_s=timeout_s)
     assert grabbed.returncode == 0 and grabbed.rawlog is not None, grabbed.output[-3000:]
-    exported = mrpt.export_2d_scans(grabbed.rawlog, "SICK")
+    exported = grabbed.scans("SICK")
     expected = create_sensor(load_scene(scene), "sick").configured_scan(1.0).values
     return exported, expected
 

@@ -30,7 +30,7 @@ def grab(folder: Path, section: str, scans: int, timeout_s: float, *, kill: bool
 def exported_scans(folder: Path, label: str, grabbed: mrpt.Grabbed):
     """(times, ranges_m, valid) of the recorded scans, via rawlog-edit."""
     assert grabbed.returncode == 0 and grabbed.rawlog is not None, grabbed.output[-3000:]
-    scans = mrpt.export_2d_scans(grabbed.rawlog, label)
+    scans = grabbed.scans(label)
     return scans.times_s, scans.ranges_m, scans.valid
 
 
@@ -110,7 +110,7 @@ def test_chokuyourg_records_a_utm_30lx_ew_over_tcp_with_intensity(serve, utm_roo
     section = f"[UTM]\ndriver = CHokuyoURG\nprocess_rate = 90\nsensorLabel = UTM\nIP_DIR = 127.0.0.1\nPORT_DIR = {port}\nintensity = true\n"
     grabbed = grab(tmp_path, section, scans=60, timeout_s=20)
     assert grabbed.returncode == 0 and grabbed.rawlog is not None, grabbed.output[-3000:]
-    scans = mrpt.export_2d_scans(grabbed.rawlog, "UTM")
+    scans = grabbed.scans("UTM")
     assert len(scans.times_s) >= 40 and scans.ranges_m.shape[1] == 1081
     period = np.median(np.diff(scans.times_s))
     assert 0.02 <= period <= 0.03, np.diff(scans.times_s)
