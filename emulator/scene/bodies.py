@@ -371,12 +371,10 @@ class _EventLog:
         the very same, to the last bit, so nothing computed before it changes). The instant from which
         the body's path changed (inf: not at all), or None if this is not such a twist."""
         with self._lock:
+            row_until = self._moving_by(time_s, twist)
+            if row_until is None:
+                return None
             last = self._count - 1
-            if last < 0 or time_s < self.last_time_s:
-                return None
-            row_until = float(self._arrays["until"][last])
-            if not (self._arrays["times"][last] <= time_s < row_until) or not np.array_equal(self._arrays["twists"][last], twist):
-                return None
             self.last_time_s = float(time_s)
             if until_s == row_until:
                 return float("inf")
@@ -384,6 +382,20 @@ class _EventLog:
             until[last] = until_s
             self._arrays = {**self._arrays, "until": until}
             return min(row_until, float(until_s))
+
+    def moving_by(self, time_s: float, twist: np.ndarray) -> float | None:
+        """The last event's stop if `twist` (3,) is the one still moving the body at `time_s`, else None."""
+        with self._lock:
+            return self._moving_by(time_s, twist)
+
+    def _moving_by(self, time_s: float, twist: np.ndarray) -> float | None:
+        last = self._count - 1
+        if last < 0 or time_s < self.last_time_s:
+            return None
+        row_until = float(self._arrays["until"][last])
+        if not (self._arrays["times"][last] <= time_s < row_until) or not np.array_equal(self._arrays["twists"][last], twist):
+            return None
+        return row_until
 
     def keep_standing(self, time_s: float) -> bool:
         """Whether the body already stands at `time_s` (a twist that cannot move it then changes
@@ -413,6 +425,7 @@ class _EventLog:
             self._count = len(events.times)
             self._arrays = {name: np.concatenate([getattr(events, name), np.zeros((max(16, self._count), *shape))])
                             for name, shape in self._COLUMNS.items()}
+            # (a merged twist later than its row's start is not known here: only ordering checks use it)
             self.last_time_s = float(events.times[-1]) if self._count else float("-inf")
 
     def snapshot(self) -> LiveEvents:
@@ -475,6 +488,11 @@ class BodyPoses:
         position, quaternion = self.live_pose(name, time_s)
         log.append(float(time_s), position, quaternion, velocity, float(until_s))
         return float(time_s)
+
+    def moving_by(self, name: str, time_s: float, twist: np.ndarray) -> float | None:
+        """Where live body `name` stops if `twist` (vx, vy, wz) is the one still moving it at `time_s`,
+        else None."""
+        return self._live_log(name).moving_by(time_s, twist)
 
     def last_event_s(self, name: str) -> float:
         """The instant of live body `name`'s latest pose or twist (-inf before any)."""

@@ -325,12 +325,9 @@ class LiveState:
         such a twist). Its path up to the old stop was searched already: a stop short of the last
         twist's watchdog was a solid, which the same path meets at the same instant; otherwise only
         the path on from the old stop is searched, up to this twist's watchdog."""
-        events = self.bodies.live_events(event.name)
-        if not len(events.times) or not (events.times[-1] <= event.time_s < events.until[-1]):
+        old_until = self.bodies.moving_by(event.name, event.time_s, twist)
+        if old_until is None:
             return None
-        if not np.array_equal(events.twists[-1], twist):
-            return None
-        old_until = float(events.until[-1])
         if old_until != last_s + drive.watchdog_s:
             return old_until  # stopped by a solid
         remaining_s = event.time_s + drive.watchdog_s - old_until
