@@ -89,7 +89,7 @@ def test_serve_refuses_a_pty_path_that_exists_and_leaves_it_alone(tmp_path: Path
 
 def vanished_pty() -> str:
     """A /dev/pts/N no pty has: what a daemon killed with SIGKILL leaves its link pointing to."""
-    number = max(int(name) for name in os.listdir("/dev/pts") if name.isdigit()) + 1000
+    number = max((int(name) for name in os.listdir("/dev/pts") if name.isdigit()), default=0) + 1000  # none open: 1000
     assert not os.path.lexists(f"/dev/pts/{number}")
     return f"/dev/pts/{number}"
 
