@@ -21,6 +21,14 @@ records of `scene.live.event_record`, applied at their simulated instants: live 
 `("done", job, result, cpu_s)` or `("failed", job, message, cpu_s)`, `cpu_s` the worker's CPU time
 since its previous answer (what the job cost it, whatever share of a core the machine gave it).
 
+Nothing writes to a worker's pipe while holding the pool's lock or on the
+daemon's loop: each worker has an outbox drained by a sender thread of its
+own. A pipe holds 64 KiB; a worker busy with a batch while world changes
+arrive, or one stopped, leaves it full, and a write then waits. Under the
+lock that was a deadlock (the reader thread, which must take the lock to
+settle the worker's answer, could not drain the worker, which could not read
+the pipe), and on the loop it froze every device and signal.
+
 A worker that dies (killed, out of memory) is restarted with the same scene,
 sensors and applied events, and the jobs it held are sent again (a scan is a
 pure function of its time, so a repeat is the same scan); a job that kills a
@@ -36,6 +44,7 @@ import itertools
 import multiprocessing
 import multiprocessing.connection
 import os
+import queue
 import sys
 import threading
 import time
@@ -51,6 +60,7 @@ from emulator.scene.model import Scene
 from emulator.sensors.scan import Scan
 
 WORKER_START_TIMEOUT_S = 120.0  # building a world from a large mesh scene can take a while
+SENDER_STOP_TIMEOUT_S = 2.0  # a sender thread given up on (a daemon thread) when its pipe never drains
 MAX_ATTEMPTS = 2  # a job is sent to at most this many worker lives
 # How many nice levels a worker computes below the daemon (`serve --worker-nice`; os.nice adds, at most 19). Workers compute a batch (0.2–0.8 s) ahead while a
 # late byte on the wire is a protocol fault, so on a machine with idle cores a higher value (19) lets
@@ -154,6 +164,22 @@ def _worker_main(
         cpu_mark = cpu_now
 
 
+def _deliver(outbox: queue.SimpleQueue, connection: multiprocessing.connection.Connection) -> None:
+    """A worker's sender thread: write its outbox's messages to its pipe in order, until None or a
+    broken pipe (the reader sees the worker's end too, and restarts it with the jobs it held)."""
+    while (message := outbox.get()) is not None:
+        try:
+            connection.send(message)
+        except (OSError, ValueError):
+            return
+
+
+def _discard_waiting(outbox: queue.SimpleQueue) -> None:
+    with contextlib.suppress(queue.Empty):
+        while True:
+            outbox.get_nowait()
+
+
 # numpy's BLAS starts a thread per core and keeps it spinning after each call: a worker (already one
 # per core) then holds two cores during a batch, and the daemon's loop waits for one to send a scan.
 SINGLE_THREAD_MATH = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
@@ -197,6 +223,8 @@ class _Worker:
     connection: multiprocessing.connection.Connection | None = None
     jobs: dict[int, _Job] = field(default_factory=dict)
     lives: int = 0
+    outbox: queue.SimpleQueue | None = None  # messages for its pipe, written by its sender thread
+    sender: threading.Thread | None = None
 
     last_done: float = 0.0  # monotonic time its last scan job came back
 
@@ -338,11 +366,10 @@ class WorkerPool:
             self._closed = True
             workers = list(self._workers)
         for worker in workers:
-            if worker.connection is not None:
-                try:
-                    worker.connection.send(("stop",))
-                except OSError:
-                    pass
+            if worker.outbox is not None:
+                _discard_waiting(worker.outbox)  # what is not sent yet no longer matters: stop goes next
+                worker.outbox.put(("stop",))
+                worker.outbox.put(None)
         with self._lock:
             self._scheduler.cancel_all()
         for worker in workers:
@@ -354,6 +381,7 @@ class WorkerPool:
             for job in worker.jobs.values():
                 job.future.cancel()
             worker.jobs.clear()
+            self._retire_sender(worker)
             if worker.connection is not None:
                 worker.connection.close()
 
@@ -371,7 +399,21 @@ class WorkerPool:
             process.start()
         child.close()
         worker.process, worker.connection = process, parent
+        worker.outbox = queue.SimpleQueue()
+        worker.sender = threading.Thread(
+            target=_deliver, args=(worker.outbox, parent), name=f"scan-worker-{worker.index}-sender", daemon=True
+        )
+        worker.sender.start()
         worker.lives += 1
+
+    @staticmethod
+    def _retire_sender(worker: _Worker) -> None:
+        """Stop the worker's sender thread before its pipe is closed: it leaves at the end of its outbox,
+        or at once when the pipe broke (the worker died or was killed, so a blocked write fails)."""
+        if worker.outbox is not None:
+            worker.outbox.put(None)
+        if worker.sender is not None:
+            worker.sender.join(timeout=SENDER_STOP_TIMEOUT_S)
 
     def _await_ready(self, worker: _Worker) -> None:
         connection = worker.connection
@@ -389,13 +431,10 @@ class WorkerPool:
         ).start()
 
     def _send(self, worker: _Worker, job_id: int) -> None:
-        """Send one job (lock held); a broken pipe is the reader's to handle (it sees EOF too)."""
+        """Hand one job to the worker's sender thread (lock held): it never waits for the pipe."""
         job = worker.jobs[job_id]
         job.attempts += 1
-        try:
-            worker.connection.send(job.message)
-        except (OSError, ValueError):
-            pass
+        worker.outbox.put(job.message)
 
     def _read(self, worker: _Worker, connection: multiprocessing.connection.Connection) -> None:
         """Settle the worker's jobs as results arrive; on EOF the worker died: restart it."""
@@ -432,6 +471,7 @@ class WorkerPool:
             retried = {job_id: job for job_id, job in held.items() if job.attempts < MAX_ATTEMPTS}
             failed = [job for job_id, job in held.items() if job_id not in retried]
             worker.jobs = retried
+            self._retire_sender(worker)
             dead.close()
             self._launch(worker)
         for job in failed:

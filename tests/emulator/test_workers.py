@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import signal
+import threading
 from pathlib import Path
 from concurrent.futures import Future
 
@@ -126,3 +127,41 @@ def test_serve_passes_worker_nice_to_its_workers() -> None:
     with ServeProcess("railway", ["urg=tcp:127.0.0.1:0"], extra_args=["--workers", "1", "--worker-nice", "7"]) as daemon:
         workers = [pid for pid in child_pids(daemon.pid) if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes()]
         assert len(workers) == 1 and _nice_of(workers[0]) == min(19, _nice_of(daemon.pid) + 7)
+
+
+def test_world_changes_for_a_worker_that_does_not_read_never_hold_the_caller() -> None:
+    """A worker that stops reading (here: stopped by SIGSTOP; in a daemon: busy with a batch while a
+    control client sends changes) fills its pipe. Handing it changes must still return at once: the
+    daemon's loop calls `apply`, and a write that waited there froze every device and signal (and,
+    under the pool's lock, deadlocked against the reader thread settling the worker's answers).
+    Once the worker runs again every change arrives, in order, and it computes scans as before."""
+    scene = load_scene("railway")
+    pool = WorkerPool(scene, ["urg"], on_restart=lambda line: None)
+    pool.start()
+    worker = pool.pids[0]
+    changes = [RegionChange(2.0 + 1e-3 * index, "car_end_smoke", 0.01 * (index % 7)) for index in range(4000)]
+    calls = [[event_record(change) for change in changes[start:start + 40]] for start in range(0, len(changes), 40)]
+    handed: list[list[Future]] = []
+
+    def hand_changes() -> None:
+        for records in calls:  # 100 calls, several hundred KiB pickled: far past a pipe's 64 KiB
+            handed.append(pool.apply(records))
+
+    try:
+        os.kill(worker, signal.SIGSTOP)
+        caller = threading.Thread(target=hand_changes, daemon=True)
+        caller.start()
+        caller.join(timeout=30)
+        assert not caller.is_alive(), f"apply waited on a full pipe: {len(handed)} of 100 calls returned"
+        os.kill(worker, signal.SIGCONT)
+        assert [future.result(timeout=60) for futures in handed for future in futures] == [40] * 100
+        world = World(scene)
+        for change in changes:
+            world.apply(change)
+        local = create_sensor(scene, "urg", world=world)
+        for time_s in (3.0, 5.9995, 7.0):
+            scan = pool.executor().submit(pool.sensor("urg").scan, time_s).result(timeout=60)
+            np.testing.assert_array_equal(scan.values, local.scan(time_s).values)
+    finally:
+        os.kill(worker, signal.SIGCONT)
+        pool.close()
