@@ -1,35 +1,40 @@
-"""Twist commands held to a rate per live body: what a flood of them may cost the daemon.
+"""Live changes held to a rate per thing changed: what a flood of them may cost the daemon.
 
-Finding where a twist stops costs the loop thread 0.3–1.5 ms on a typical
-scene and up to 25 ms on the worst a scene file allows (docs/control.md,
-"Driving a body by velocity"). Unlimited, one client sending them as fast as
-it can would hold the loop every other client's scans and answers need.
-Each live body therefore has a token bucket: TWIST_BURST commands at once,
-refilled at TWIST_RATE_HZ a second of wall time (the loop's time, not the
-simulated clock). A ROS cmd_vel bridge sends 10–100 a second: it always
-passes, with room for jitter; beyond the rate the command is refused (HTTP
-429, a WebSocket error message naming the limit) before any work is done,
-and nothing changes. The limit is per body, not per connection, so opening
-more connections buys no more: the twists' cost stays bounded by the scene's
-live bodies × TWIST_RATE_HZ. Refusing costs too (40 000 refused WebSocket
-messages a second took a core): the refusal is answered when the body's next
-token is due, and a WebSocket client's further messages are not read before
-then, so a client sending as fast as it can is paced to about the rate by its
-own connection's back-pressure, at no cost to the daemon while it waits. Replayed event logs (`--events-in`) are not
-front-end commands and are not limited. The other live changes cost
-microseconds each and are not limited; their values are held to the scene
+Every change costs more than its own check: it goes to every worker process,
+is held in the live history for a minute of simulated time, and drops the
+scans foreseen from its instant; a twist also has its stop searched for on
+the loop thread (0.3–1.5 ms on a typical scene, up to 25 ms on the worst a
+scene file allows: docs/control.md, "Driving a body by velocity"). Unlimited,
+one client sending changes as fast as it can took the loop from every other
+client (a WebSocket client sent 18 000 region changes a second, and the URG
+beside it got 2 scans in 10 s). So each thing a client can change (a smoke
+region, a plume, a live body's pose, its twist, the clock) has a token
+bucket: CHANGE_BURST changes at once, refilled at CHANGE_RATE_HZ a second of
+wall time (the loop's time, not the simulated clock). A ROS cmd_vel bridge
+sends 10–100 twists a second: it always passes, with room for jitter; beyond
+the rate a change is refused (HTTP 429, a WebSocket error message naming the
+limit) before any work is done, and nothing changes. The limit is per thing,
+not per connection, so opening more connections buys no more: what changes
+cost stays bounded by the scene's live things × CHANGE_RATE_HZ. Refusing costs
+too (40 000 refused WebSocket messages a second took a core): the refusal is
+answered when the thing's next token is due, and a WebSocket client's further
+messages are not read before then, so a client sending as fast as it can is
+paced to about the rate by its own connection's back-pressure, at no cost to
+the daemon while it waits. Replayed event logs (`--events-in`) are not front-end
+commands and are not limited. The values of changes are held to the scene
 file's limits (scene/live_limits.py).
 """
 
 from __future__ import annotations
 
 import time
-from typing import Callable, Iterable
+from typing import Callable
 
-from emulator.control.events import ControlError
+from emulator.control.events import ControlError, live_bodies
+from emulator.scene.model import Scene
 
-TWIST_RATE_HZ = 125.0  # sustained twist commands a second per live body: a 100 Hz bridge with 25 % to spare
-TWIST_BURST = 25  # commands one body may take at once (a bridge that caught up after a stall)
+CHANGE_RATE_HZ = 125.0  # sustained changes a second per thing changed: a 100 Hz bridge with 25 % to spare
+CHANGE_BURST = 25  # changes one thing may take at once (a bridge that caught up after a stall)
 
 
 class TokenBucket:
@@ -55,28 +60,45 @@ class TokenBucket:
         return max(1.0 - self._tokens, 0.0) / self.rate_hz
 
 
-class TwistRate:
-    """A token bucket per name in `bodies` (the scene's live bodies), on `clock` (seconds, monotonic)."""
+def changeable(scene: Scene) -> dict[tuple[str, str | None], str]:
+    """Every (op, name) a client may change in `scene`, with the key its refusal names."""
+    things: dict[tuple[str, str | None], str] = {("clock", None): "clock"}
+    things.update({("region", region.name): f"smoke.regions[{region.name}]" for region in scene.regions})
+    things.update({("plume", plume.name): f"smoke.plumes[{plume.name}]" for plume in scene.plumes})
+    for name in live_bodies(scene):
+        things.update({("pose", name): f"bodies[{name}].pose", ("twist", name): f"bodies[{name}].twist"})
+    return things
+
+
+class ChangeRate:
+    """A token bucket per (op, name) in `things` (`changeable`), on `clock` (seconds, monotonic)."""
 
     def __init__(
-        self, bodies: Iterable[str], clock: Callable[[], float] = time.monotonic,
-        rate_hz: float = TWIST_RATE_HZ, burst: int = TWIST_BURST,
+        self, things: dict[tuple[str, str | None], str], clock: Callable[[], float] = time.monotonic,
+        rate_hz: float = CHANGE_RATE_HZ, burst: int = CHANGE_BURST,
     ) -> None:
         now = clock()
         self._clock = clock
-        self._buckets = {name: TokenBucket(rate_hz, burst, now) for name in bodies}
+        self._keys = dict(things)
+        self._buckets = {thing: TokenBucket(rate_hz, burst, now) for thing in things}
 
-    def refusal(self, name: object) -> tuple[ControlError, float] | None:
-        """None if body `name` may take a twist now (its token taken), else the 429 naming the limit and
-        the seconds until its next token. A name that is not a live body passes: the change itself then
-        answers 404 or 409, and no bucket is made for it."""
-        bucket = self._buckets.get(name) if isinstance(name, str) else None
+    def refusal(self, op: object, name: object) -> tuple[ControlError, float] | None:
+        """None if `op` on `name` may go now (its token taken), else the 429 naming the limit and the
+        seconds until its next token. Anything else passes (an unknown op or name, a body that is not
+        live): the change itself then answers 400, 404 or 409, and no bucket is made for it."""
+        thing = (op, None if op == "clock" else name)
+        bucket = self._buckets.get(thing) if isinstance(op, str) and (name is None or isinstance(name, str)) else None
         if bucket is None or bucket.take(self._clock()):
             return None
+        key = self._keys[thing]
         error = ControlError(
             429,
-            f"bodies[{name}].twist: more than {bucket.rate_hz:g} twist commands a second for one body "
-            f"(bursts of up to {bucket.burst}); refused, nothing changed: send at most {bucket.rate_hz:g} a second",
-            f"bodies[{name}].twist",
+            f"{key}: more than {bucket.rate_hz:g} {op} commands a second{_for_one(op)} (bursts of up to "
+            f"{bucket.burst}); refused, nothing changed: send at most {bucket.rate_hz:g} a second",
+            key,
         )
         return error, bucket.wait_s()
+
+
+def _for_one(op: str) -> str:
+    return {"region": " for one region", "plume": " for one plume", "pose": " for one body", "twist": " for one body"}.get(op, "")

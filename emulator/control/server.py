@@ -3,8 +3,8 @@
 Every answer is JSON. Client mistakes get a 4xx with `{"error", "key"}` in
 the scene loader's words (404 unknown name or path, 400 a refused value or
 body, 405 a method the path does not take, 409 a change the resource does
-not allow, 413 a body over 64 KiB, 401 a missing or wrong token, 429 twist
-commands for one body faster than control/twist_rate.py allows). Bodies are
+not allow, 413 a body over 64 KiB, 401 a missing or wrong token, 429 changes
+to one thing faster than control/change_rate.py allows). Bodies are
 read within 64 KiB, WebSocket messages too; each WebSocket client has a
 bounded queue of outgoing messages, and a client that stops reading is
 dropped when it fills, so it neither grows the daemon's memory nor delays
@@ -27,10 +27,10 @@ from typing import Any, Awaitable, Callable
 
 from aiohttp import WSMsgType, web
 
-from emulator.control.events import ControlError, event_json, live_bodies
+from emulator.control.events import ControlError, event_json
 from emulator.control.scan_feed import ScanFeed
 from emulator.control.session import LiveSession
-from emulator.control.twist_rate import TwistRate
+from emulator.control.change_rate import ChangeRate, changeable
 from emulator.errors import UserError
 from emulator.scene.live import ClockChange, LiveEvent
 
@@ -100,7 +100,7 @@ class ControlServer:
         rate_clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.session = session
-        self.twists = TwistRate(live_bodies(session.scene), rate_clock)  # per live body: control/twist_rate.py
+        self.changes = ChangeRate(changeable(session.scene), rate_clock)  # per thing changed: control/change_rate.py
         self.address = address
         self._token = token
         self._serializer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="control-json")
@@ -197,7 +197,7 @@ class ControlServer:
 
     def _change_handler(self, op: str) -> Callable[[web.Request], Awaitable[web.Response]]:
         async def handle(request: web.Request) -> web.Response:
-            if op == "twist" and (refused := self.twists.refusal(request.match_info.get("name"))) is not None:
+            if (refused := self.changes.refusal(op, request.match_info.get("name"))) is not None:
                 error, wait_s = refused  # before the body is even read; answered when the next token is due
                 await asyncio.sleep(wait_s)
                 raise error
@@ -243,8 +243,8 @@ class ControlServer:
 
     def _on_message(self, client: _Client, text: str) -> float:
         """A subscription or a change; a refused one is answered with an error message, the socket stays.
-        The seconds to wait before reading the client's next message (a twist over the rate: until the
-        body's next token)."""
+        The seconds to wait before reading the client's next message (a change over the rate: until the
+        thing's next token)."""
         try:
             data = _parse_json(text)
             if not isinstance(data, dict):
@@ -254,7 +254,7 @@ class ControlServer:
                 return 0.0
             body = dict(data)
             op, name = body.pop("op", None), body.pop("name", None)
-            if op == "twist" and (refused := self.twists.refusal(name)) is not None:
+            if (refused := self.changes.refusal(op, name)) is not None:
                 client.offer(_error_message(refused[0]))
                 return refused[1]
             self.session.request(op, name, body)

@@ -1,4 +1,4 @@
-"""Twist commands held to a rate per live body (control/twist_rate.py): a token bucket on an injected
+"""Live changes held to a rate per thing changed (control/change_rate.py): a token bucket on an injected
 clock, refusing with a 429 (HTTP) or an error message (WebSocket) that names the limit, before any work."""
 
 from __future__ import annotations
@@ -8,7 +8,8 @@ import json
 import pytest
 from test_twist import Api, run
 
-from emulator.control.twist_rate import TWIST_BURST, TWIST_RATE_HZ, TokenBucket, TwistRate
+from emulator.control.change_rate import CHANGE_BURST, CHANGE_RATE_HZ, ChangeRate, TokenBucket, changeable
+from emulator.scene import load_scene
 
 
 class Tick:
@@ -34,41 +35,64 @@ def test_a_bucket_takes_its_burst_then_its_rate_and_a_clock_going_back_adds_noth
 
 def test_a_100_hz_bridge_with_jitter_always_passes_and_200_hz_is_held_to_the_rate() -> None:
     clock = Tick()
-    limit = TwistRate(["robot"], clock)
+    limit = ChangeRate({("twist", "robot"): "bodies[robot].twist"}, clock)
     jitter = [0.004, 0.016, 0.0, 0.02, 0.01] * 400  # 100 Hz on average, in pairs and gaps, for 20 s
     for gap in jitter:
         clock.now += gap
-        assert limit.refusal("robot") is None
+        assert limit.refusal("twist", "robot") is None
     refused = 0
     for _ in range(4000):  # then 200 Hz for 20 s
         clock.now += 0.005
-        if (refusal := limit.refusal("robot")) is not None:
+        if (refusal := limit.refusal("twist", "robot")) is not None:
             refused += 1
             error, wait_s = refusal
             assert error.status == 429 and error.key == "bodies[robot].twist"
-            assert f"more than {TWIST_RATE_HZ:g} twist commands a second" in error.message
-            assert 0.0 < wait_s <= 1.0 / TWIST_RATE_HZ
-    assert 4000 - refused == pytest.approx(20 * TWIST_RATE_HZ + TWIST_BURST, abs=2)
+            assert f"more than {CHANGE_RATE_HZ:g} twist commands a second" in error.message
+            assert 0.0 < wait_s <= 1.0 / CHANGE_RATE_HZ
+    assert 4000 - refused == pytest.approx(20 * CHANGE_RATE_HZ + CHANGE_BURST, abs=2)
 
 
 def test_a_refusal_says_when_the_next_token_is_due() -> None:
     clock = Tick()
-    limit = TwistRate(["robot"], clock, rate_hz=100.0, burst=1)
-    assert limit.refusal("robot") is None
+    limit = ChangeRate({("twist", "robot"): "bodies[robot].twist"}, clock, rate_hz=100.0, burst=1)
+    assert limit.refusal("twist", "robot") is None
     clock.now += 0.004
-    _, wait_s = limit.refusal("robot")
+    _, wait_s = limit.refusal("twist", "robot")
     assert wait_s == pytest.approx(0.006)
     clock.now += wait_s
-    assert limit.refusal("robot") is None
+    assert limit.refusal("twist", "robot") is None
 
 
-def test_names_that_are_not_live_bodies_pass_and_make_no_bucket() -> None:
+def test_names_that_are_not_live_things_pass_and_make_no_bucket() -> None:
     clock = Tick()
-    limit = TwistRate(["robot"], clock)
+    limit = ChangeRate(changeable(load_scene("rescue-live")), clock)
+    things = dict(limit._buckets)
     for k in range(10_000):
-        assert limit.refusal(f"nobody{k}") is None  # the change answers 404 itself
-        assert limit.refusal(None) is None
-    assert list(limit._buckets) == ["robot"]
+        assert limit.refusal("twist", f"nobody{k}") is None  # the change answers 404 itself
+        assert limit.refusal("twist", None) is None
+        assert limit.refusal("region", ["east_room"]) is None  # the change answers 400
+        assert limit.refusal(["region"], "east_room") is None
+        assert limit.refusal("pose", "east_door") is None  # not a live body: the change answers 409
+    assert limit._buckets == things
+
+
+def test_every_live_thing_has_its_own_bucket_named_in_its_refusal() -> None:
+    """Each region, plume, live body's pose and twist, and the clock: a burst, then refusals naming it;
+    one thing's flood leaves the others their whole burst."""
+    clock = Tick()
+    scene = load_scene("rescue-live")
+    things = changeable(scene)
+    assert set(things) == {
+        ("clock", None), ("region", "east_room"), ("region", "corridor_haze"), ("plume", "smoulder"),
+        ("pose", "robot"), ("twist", "robot"),
+    }
+    limit = ChangeRate(things, clock)
+    for (op, name), key in things.items():
+        asked = name if op != "clock" else None
+        assert [limit.refusal(op, asked) is None for _ in range(CHANGE_BURST)] == [True] * CHANGE_BURST
+        error, wait_s = limit.refusal(op, asked)
+        assert error.status == 429 and error.key == key and error.message.startswith(f"{key}: more than 125 {op} commands")
+        assert 0.0 < wait_s <= 1.0 / CHANGE_RATE_HZ
 
 
 def test_the_api_refuses_a_flood_per_body_over_http_and_websocket_and_changes_nothing() -> None:
@@ -78,7 +102,7 @@ def test_the_api_refuses_a_flood_per_body_over_http_and_websocket_and_changes_no
         async with Api(rate_clock=clock) as api:
             api.clock._now = 1.0
             statuses, refusal = [], {}
-            for _ in range(TWIST_BURST + 10):  # all at one wall instant
+            for _ in range(CHANGE_BURST + 10):  # all at one wall instant
                 status, answer = await api.call("PUT", "/api/bodies/robot/twist", {"vx": 0.2})
                 statuses.append(status)
                 if status == 429:
@@ -99,8 +123,8 @@ def test_the_api_refuses_a_flood_per_body_over_http_and_websocket_and_changes_no
             return statuses, refusal, errors, applied, len(api.session.events)
 
     statuses, refusal, errors, applied, after = run(flood())
-    assert statuses == [200] * TWIST_BURST + [429] * 10
+    assert statuses == [200] * CHANGE_BURST + [429] * 10
     assert refusal["key"] == "bodies[robot].twist" and "refused, nothing changed" in refusal["error"]
-    assert applied == TWIST_BURST  # the refused ones are not in the log
+    assert applied == CHANGE_BURST  # the refused ones are not in the log
     assert [error["status"] for error in errors] == [429, 429] and errors[0]["key"] == "bodies[robot].twist"
-    assert after == TWIST_BURST + 12  # the 12 the refill allowed, not the 13th
+    assert after == CHANGE_BURST + 12  # the 12 the refill allowed, not the 13th

@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 from emulator.bench.serve_process import ServeProcess, serve_command
-from emulator.control.twist_rate import TWIST_BURST, TWIST_RATE_HZ
+from emulator.control.change_rate import CHANGE_BURST, CHANGE_RATE_HZ
 from emulator.scene import load_scene
 from emulator.scene.loader import MAX_BODY_SPEED_M_S, MAX_DENSITY, MAX_PARTICLES_ALIVE
 from tests.robustness.conftest import SCALE
@@ -203,24 +203,33 @@ def test_an_event_log_over_a_limit_is_refused_at_load(tmp_path: Path) -> None:
 
 
 TWIST = {"vx": 1.0, "wz": 0.0}  # at the body's max_speed: soon pushing into a wall
+# what each flood sends: (the WebSocket message, the HTTP method, path and body)
+FLOODS = {
+    "twist": ({"op": "twist", "name": "robot", **TWIST}, ("PUT", "/api/bodies/robot/twist", TWIST)),
+    "smoke": (
+        {"op": "region", "name": "east_room", "density": 0.002},
+        ("PATCH", "/api/smoke/plumes/smoulder", {"wind": [0.1, 0.0, 0.0]}),
+    ),
+}
 
 
-async def _flood_websocket(url: str, flood_s: float) -> tuple[int, list[dict]]:
-    """Twists at up to 5 kHz (40 times the rate), reading the answers meanwhile; at the end the close
+async def _flood_websocket(url: str, flood_s: float, change: str) -> tuple[int, list[dict]]:
+    """Changes at up to 5 kHz (40 times the rate), reading the answers meanwhile; at the end the close
     handshake is not waited for (the daemon reads what is still queued on its own pace)."""
     sent, errors = 0, []
+    message = FLOODS[change][0]
     close = aiohttp.ClientWSTimeout(ws_close=0.5)
     async with aiohttp.ClientSession() as http, http.ws_connect(url + "/api/ws", timeout=close) as ws:
         async def read() -> None:
-            async for message in ws:
-                data = json.loads(message.data)
+            async for answer in ws:
+                data = json.loads(answer.data)
                 if data["type"] == "error":
                     errors.append(data)
 
         reader = asyncio.create_task(read())
         end = time.monotonic() + flood_s
         while time.monotonic() < end:
-            await ws.send_json({"op": "twist", "name": "robot", **TWIST})
+            await ws.send_json(message)
             sent += 1
             if sent % 50 == 0:
                 await asyncio.sleep(0.01)  # and let the reader keep up
@@ -228,13 +237,14 @@ async def _flood_websocket(url: str, flood_s: float) -> tuple[int, list[dict]]:
     return sent, errors
 
 
-async def _flood_put(url: str, flood_s: float) -> tuple[int, list[dict]]:
-    """Twists over HTTP, one after another on a keep-alive connection."""
+async def _flood_http(url: str, flood_s: float, change: str) -> tuple[int, list[dict]]:
+    """Changes over HTTP, one after another on a keep-alive connection."""
     sent, refusals = 0, []
+    method, path, body = FLOODS[change][1]
     async with aiohttp.ClientSession() as http:
         end = time.monotonic() + flood_s
         while time.monotonic() < end:
-            async with http.put(url + "/api/bodies/robot/twist", json=TWIST) as answer:
+            async with http.request(method, url + path, json=body) as answer:
                 sent += 1
                 if answer.status == 429:
                     refusals.append(await answer.json())
@@ -249,10 +259,38 @@ def _started(pause_s: float) -> int:
     return os.getpid()
 
 
-def flood(client: str, url: str, flood_s: float) -> tuple[int, list[dict]]:
+def flood(client: str, url: str, flood_s: float, change: str) -> tuple[int, list[dict]]:
     """One flooding client, run in a process of its own (as a client is): its CPU is the machine's,
     but it does not hold the reading test's interpreter lock."""
-    return asyncio.run({"websocket": _flood_websocket, "put": _flood_put}[client](url, flood_s))
+    return asyncio.run({"websocket": _flood_websocket, "http": _flood_http}[client](url, flood_s, change))
+
+
+def _flooded(change: str, flood_s: float) -> tuple[list[float], list[tuple[int, list[dict]]], list[dict]]:
+    """rescue-live with its URG streamed while a WebSocket client and an HTTP client flood `change`: the
+    scans' arrivals during the flood, each client's (sent, refusals), and the event log. Leaving the
+    `with` stops the daemon by SIGTERM, and fails if it did not stop within ServeProcess's timeout."""
+    spawn = multiprocessing.get_context("spawn")
+    with ServeProcess("rescue-live", ["urg=tcp:127.0.0.1:0"]) as served, ProcessPoolExecutor(2, mp_context=spawn) as clients:
+        started = [clients.submit(_started, 0.3) for _ in range(2)]  # both up before the flood
+        assert len({future.result() for future in started}) == 2
+        url = served.control_url
+        stream = UrgStream(served.endpoint("urg", "tcp").address)
+        try:
+            stream.read_for(1.0)
+            sent = [clients.submit(flood, client, url, flood_s, change) for client in ("websocket", "http")]
+            during = stream.read_for(flood_s)
+            answers = [future.result() for future in sent]
+        finally:
+            stream.close()
+        with urllib.request.urlopen(url + "/api/events", timeout=10) as answer:
+            events = json.loads(answer.read())
+    return during, answers, events
+
+
+def _busiest_second(stamps: list[float]) -> int:
+    """The most changes stamped within any 1 s of the simulated clock."""
+    times = np.sort(np.array(stamps))
+    return int((np.searchsorted(times, times + 1.0) - np.arange(len(times))).max()) if len(times) else 0
 
 
 def test_a_twist_flood_is_held_to_the_rate_and_another_clients_scans_stay_on_time() -> None:
@@ -262,32 +300,42 @@ def test_a_twist_flood_is_held_to_the_rate_and_another_clients_scans_stay_on_tim
     per-body rate they are refused (429, an error message naming the limit), no second of simulated time
     gets more twists than the rate plus the burst, and the URG's MD stream, another client's, keeps coming."""
     flood_s = 3.0 * SCALE
-
-    spawn = multiprocessing.get_context("spawn")
-    with ServeProcess("rescue-live", ["urg=tcp:127.0.0.1:0"]) as served, ProcessPoolExecutor(2, mp_context=spawn) as clients:
-        started = [clients.submit(_started, 0.3) for _ in range(2)]  # both up before the flood
-        assert len({future.result() for future in started}) == 2
-        url = served.control_url
-        stream = UrgStream(served.endpoint("urg", "tcp").address)
-        try:
-            stream.read_for(1.0)
-            sent = [clients.submit(flood, client, url, flood_s) for client in ("websocket", "put")]
-            during = stream.read_for(flood_s)
-            (ws_sent, errors), (put_sent, refusals) = (future.result() for future in sent)
-        finally:
-            stream.close()
-        with urllib.request.urlopen(url + "/api/events", timeout=10) as answer:
-            stamps = np.array([event["t"] for event in json.loads(answer.read()) if event["op"] == "twist"])
+    during, ((ws_sent, errors), (put_sent, refusals)), events = _flooded("twist", flood_s)
     load = os.getloadavg()[0]
+    stamps = [event["t"] for event in events if event["op"] == "twist"]
     assert refusals and errors, (len(refusals), len(errors))
     for refusal in [*refusals[:3], *errors[:3]]:
         assert refusal["key"] == "bodies[robot].twist", refusal
-        assert f"more than {TWIST_RATE_HZ:g} twist commands a second" in refusal["error"], refusal
+        assert f"more than {CHANGE_RATE_HZ:g} twist commands a second" in refusal["error"], refusal
     assert ws_sent + put_sent > 2 * len(stamps), (ws_sent, put_sent, len(stamps))  # the flood outran the rate
-    busiest = int((np.searchsorted(stamps, stamps + 1.0) - np.arange(len(stamps))).max())  # in any 1 s of the clock
-    assert busiest <= TWIST_RATE_HZ + TWIST_BURST, busiest
+    assert _busiest_second(stamps) <= CHANGE_RATE_HZ + CHANGE_BURST, _busiest_second(stamps)
     expected = flood_s / URG_PERIOD_S
 
+    assert len(during) >= 0.7 * expected, f"{len(during)} scans of {expected:.0f} (load average {load:.1f})"
+    assert longest_gap_s(during) < 1.0, f"the sensor went silent for {longest_gap_s(during):.2f} s (load average {load:.1f})"
+
+
+def test_a_flood_of_smoke_changes_is_held_to_the_rate_and_the_daemon_stays_responsive() -> None:
+    """A WebSocket client changing a region's density and an HTTP client changing a plume's wind, each as
+    fast as it can. Unlimited, 18 000 region changes a second took the loop (the URG beside them got
+    2 scans in 10 s) and, before the workers had sender threads, froze the daemon for good (SIGTERM
+    ignored). Now each is refused beyond the per-thing rate, naming the limit; no second of simulated
+    time gets more of either than the rate plus the burst; the URG keeps streaming; SIGTERM stops it."""
+    flood_s = 3.0 * SCALE
+    during, ((ws_sent, errors), (http_sent, refusals)), events = _flooded("smoke", flood_s)
+    load = os.getloadavg()[0]
+    assert errors and refusals, (len(errors), len(refusals))
+    for error in errors[:3]:
+        assert error["key"] == "smoke.regions[east_room]", error
+        assert f"more than {CHANGE_RATE_HZ:g} region commands a second for one region" in error["error"], error
+    for refusal in refusals[:3]:
+        assert refusal["key"] == "smoke.plumes[smoulder]", refusal
+        assert f"more than {CHANGE_RATE_HZ:g} plume commands a second for one plume" in refusal["error"], refusal
+    for op, sent in (("region", ws_sent), ("plume", http_sent)):
+        stamps = [event["t"] for event in events if event["op"] == op]
+        assert sent > len(stamps), (op, sent, len(stamps))  # some were refused, none applied twice
+        assert _busiest_second(stamps) <= CHANGE_RATE_HZ + CHANGE_BURST, (op, _busiest_second(stamps))
+    expected = flood_s / URG_PERIOD_S
     assert len(during) >= 0.7 * expected, f"{len(during)} scans of {expected:.0f} (load average {load:.1f})"
     assert longest_gap_s(during) < 1.0, f"the sensor went silent for {longest_gap_s(during):.2f} s (load average {load:.1f})"
 
