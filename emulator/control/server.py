@@ -193,7 +193,7 @@ class ControlServer:
         return web.json_response(self.session.state())
 
     async def _events(self, request: web.Request) -> web.Response:
-        return web.json_response(self.session.event_log())
+        return web.Response(text=self.session.event_log_text(), content_type="application/json")
 
     def _change_handler(self, op: str) -> Callable[[web.Request], Awaitable[web.Response]]:
         async def handle(request: web.Request) -> web.Response:

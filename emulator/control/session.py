@@ -5,13 +5,17 @@ Every front end (HTTP, WebSocket, `serve --events-in`) hands its changes to
 instant they take effect, applies them to the daemon (world, scan caches,
 clock), appends them to the event log (and `--events FILE`), and tells its
 listeners (the WebSocket clients' state messages). In memory it keeps the
-last `EVENTS_SHOWN` events (`GET /api/events`); the file keeps them all.
+last `EVENTS_SHOWN` events (`GET /api/events`), each also as its JSON text,
+made once when it is applied: building the JSON of 10 000 events took the
+loop 34 ms a request, every other client's scans waiting meanwhile; joining
+the texts takes 0.5 ms. The file keeps them all.
 """
 
 from __future__ import annotations
 
 import collections
 import dataclasses
+import json
 import math
 from pathlib import Path
 from typing import Any, Callable, Mapping
@@ -36,6 +40,7 @@ class LiveSession:
         self.daemon = daemon
         self.scene: Scene = daemon.scene
         self.events: collections.deque[LiveEvent] = collections.deque(maxlen=EVENTS_SHOWN)
+        self._event_texts: collections.deque[str] = collections.deque(maxlen=EVENTS_SHOWN)  # `events`, as JSON
         self.applied = 0  # events applied in all
         self.limits = LiveLimits(self.scene)  # the scene file's limits, for every change in turn
         self._writer = writer
@@ -62,6 +67,7 @@ class LiveSession:
         except ValueError as error:
             raise ControlError(409, str(error), f"bodies[{event.name}]") from None
         self.events.append(event)
+        self._event_texts.append(json.dumps(event_json(event)))
         self.applied += 1
         record(self.limits, event)
         if self.daemon.live is not None:
@@ -78,8 +84,9 @@ class LiveSession:
 
     # ----------------------------------------------------------------------- what the API shows
 
-    def event_log(self) -> list[dict[str, Any]]:
-        return [event_json(event) for event in self.events]
+    def event_log_text(self) -> str:
+        """`GET /api/events`: the events kept, as one JSON array."""
+        return "[" + ", ".join(self._event_texts) + "]"
 
     def state(self) -> dict[str, Any]:
         """`GET /api/state`: the clock, and what holds now of every live quantity."""
