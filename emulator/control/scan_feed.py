@@ -39,6 +39,10 @@ def configured_request(spec: SensorSpec) -> dict[str, Any]:
     return configured_window(spec.options) if spec.model == "lms200" else {}
 
 
+def _scan_text(scan: Scan, period_s: float) -> str:
+    return json.dumps(scan_json(scan, None, period_s))
+
+
 def configured_period_s(spec: SensorSpec) -> float:
     """The time one configured scan takes: a Hokuyo's revolution (0.1 s URG-04LX, 25 ms the others);
     1, 2 or 4 mirror revolutions (LMS200)."""
@@ -59,6 +63,7 @@ class ScanFeed:
         self._clock_changed = clock_changed
         self._subscribers: dict[str, set[Subscriber]] = {}
         self._tasks: dict[str, asyncio.Task] = {}
+        self._served: dict[str, tuple[Scan, float, str]] = {}  # per sensor: what `latest` served last (cache's scan, time, text)
 
     def spec(self, name: str) -> SensorSpec | None:
         return next((spec for spec in self._daemon.scene.sensors if spec.name == name), None)
@@ -67,24 +72,32 @@ class ScanFeed:
         """Whether this daemon computes the sensor's scans (a fleet's daemon serves only its group)."""
         return name in self._daemon.scan_caches
 
-    async def latest(self, name: str) -> dict[str, Any]:
-        """The sensor's latest completed scan (at the last period boundary at or before now), as JSON."""
+    async def latest(self, name: str) -> str:
+        """The sensor's latest completed scan (at the last period boundary at or before now), as JSON text.
+        Made in the serializer thread, once per scan: clients polling faster than the sensor scans get
+        the same text, and the loop never encodes a scan."""
         spec = self.spec(name)
         assert spec is not None
         period = configured_period_s(spec)
         time_s = max(0, math.floor(self._daemon.clock.now() / period + 1e-9)) * period
-        scan = await self._scan(spec, time_s)
-        return await asyncio.get_running_loop().run_in_executor(self._serializer, scan_json, scan, None, period)
+        computed = await self._scan(spec, time_s)
+        served = self._served.get(name)
+        if served is None or served[0] is not computed or served[1] != time_s:
+            scan = _stamped(computed, time_s)
+            text = await asyncio.get_running_loop().run_in_executor(self._serializer, _scan_text, scan, period)
+            self._served[name] = served = (computed, time_s, text)
+        return served[2]
 
     async def _scan(self, spec: SensorSpec, time_s: float) -> Scan:
-        """The scan at `time_s`, computed again if a live change replaced it while it was computed."""
+        """The cache's scan for `time_s` (its own stamp may differ: see `_stamped`), computed again if a
+        live change replaced it while it was computed."""
         cache: ScanCache = self._daemon.scan_caches[spec.name]
         request = configured_request(spec)
         while True:
             future = cache.request(time_s, **request)
             scan = await asyncio.wrap_future(future)
             if cache.holds(time_s, future, **request):
-                return scan if scan.time_s == time_s else _retimed(scan, time_s)
+                return scan
 
     def subscribe(self, name: str, subscriber: Subscriber) -> None:
         self._subscribers.setdefault(name, set()).add(subscriber)
@@ -119,7 +132,7 @@ class ScanFeed:
                     pass
                 if clock.now() < time_s - 1e-6:
                     continue
-            scan = await self._scan(spec, time_s)
+            scan = _stamped(await self._scan(spec, time_s), time_s)
             counters = self._daemon.sensor_counters().get(name, {})
             behind = {key: counters[key] for key in ("late", "skipped") if key in counters}
             message = await loop.run_in_executor(self._serializer, _scan_message, scan, period, behind)
@@ -133,5 +146,6 @@ def _scan_message(scan: Scan, period_s: float, behind: dict[str, int]) -> str:
     return json.dumps({"type": "scan", **scan_json(scan, None, period_s), **behind})
 
 
-def _retimed(scan: Scan, time_s: float) -> Scan:
-    return dataclasses.replace(scan, time_s=time_s)
+def _stamped(scan: Scan, time_s: float) -> Scan:
+    """The scan stamped `time_s` (the instant asked for, if the cache's scan carries another)."""
+    return scan if scan.time_s == time_s else dataclasses.replace(scan, time_s=time_s)

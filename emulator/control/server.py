@@ -210,7 +210,7 @@ class ControlServer:
     async def _scan(self, request: web.Request) -> web.Response:
         name = request.match_info["name"]
         self._check_sensor(name)
-        return web.json_response(await self.feed.latest(name))
+        return web.Response(text=await self.feed.latest(name), content_type="application/json")
 
     def _check_sensor(self, name: str) -> None:
         """404 for a name the scene lacks, 409 for a sensor of the scene this daemon does not serve."""

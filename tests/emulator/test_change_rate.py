@@ -9,10 +9,7 @@ import pytest
 from test_twist import Api, run
 
 from emulator.control.change_rate import CHANGE_BURST, CHANGE_RATE_HZ, ChangeRate, TokenBucket, changeable
-from emulator.control.events import event_json
-from emulator.control.session import EVENTS_SHOWN
 from emulator.scene import load_scene
-from emulator.scene.live import RegionChange
 
 
 class Tick:
@@ -132,20 +129,3 @@ def test_the_api_refuses_a_flood_per_body_over_http_and_websocket_and_changes_no
     assert [error["status"] for error in errors] == [429, 429] and errors[0]["key"] == "bodies[robot].twist"
     assert after == CHANGE_BURST + 12  # the 12 the refill allowed, not the 13th
 
-
-def test_the_event_log_served_is_the_last_events_applied_as_their_json() -> None:
-    """GET /api/events serves the JSON text each event got when it was applied (building 10 000 events'
-    JSON per request took the loop 34 ms): the last EVENTS_SHOWN events, oldest first, equal to their
-    `event_json`, once the kept ones have wrapped round."""
-
-    async def served() -> tuple[list, list]:
-        async with Api() as api:
-            for index in range(EVENTS_SHOWN + 5):
-                api.session.apply(RegionChange(1.0 + 1e-3 * index, "east_room", 1e-4 * (index % 9)))
-            async with api.http.get(api.url + "/api/events") as answer:
-                assert answer.status == 200 and answer.content_type == "application/json"
-                return await answer.json(), [event_json(event) for event in api.session.events]
-
-    log, expected = run(served())
-    assert len(log) == EVENTS_SHOWN and log == expected
-    assert log[0]["t"] == pytest.approx(1.005) and log[-1]["t"] == pytest.approx(1.0 + 1e-3 * (EVENTS_SHOWN + 4))
