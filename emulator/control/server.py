@@ -187,7 +187,7 @@ class ControlServer:
     # ----------------------------------------------------------------------- resources
 
     async def _scene(self, request: web.Request) -> web.Response:
-        return web.json_response(self.session.scene_json())
+        return web.Response(text=self.session.scene_text, content_type="application/json")
 
     async def _state(self, request: web.Request) -> web.Response:
         return web.json_response(self.session.state())

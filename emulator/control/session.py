@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import functools
 import json
 import math
 from pathlib import Path
@@ -127,9 +128,11 @@ class LiveSession:
             bodies[name] = {**pose_json(live.body_pose(name, now)), "twist": dataclasses.asdict(live.body_twist(name, now))}
         return {"time_s": round(now, 6), "bodies": bodies}
 
-    def scene_json(self) -> dict[str, Any]:
-        """`GET /api/scene`: the loaded scene as plain JSON."""
-        return plain(self.scene)
+    @functools.cached_property
+    def scene_text(self) -> str:
+        """`GET /api/scene`: the loaded scene as JSON text, made once (rescue's takes 8 ms: per request,
+        a client polling it would hold the loop from every device)."""
+        return json.dumps(plain(self.scene))
 
 
 def pose_json(pose: Pose) -> dict[str, list[float]]:

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import json
 from concurrent.futures import Executor, Future
 
 import pytest
 from test_twist import Api, run
 
 from emulator.control.events import event_json
-from emulator.control.session import EVENTS_SHOWN
+from emulator.control.session import EVENTS_SHOWN, plain
 from emulator.daemon.scan_cache import ScanCache
 from emulator.scene.live import RegionChange
 from emulator.sensors import create_sensor
@@ -74,3 +75,22 @@ def test_a_scan_polled_many_times_a_period_is_encoded_once_and_again_after_a_cha
     assert once == 1 and all(scan == same[0] for scan in same) and same[0]["time_s"] == pytest.approx(30.0)
     assert after_period == 2 and later["time_s"] == pytest.approx(30.1)
     assert after_change == 3 and changed["time_s"] == pytest.approx(30.1)
+
+
+def test_the_scene_is_served_as_its_plain_json_made_once() -> None:
+    """GET /api/scene: the scene as plain JSON (rescue's takes 8 ms to make), made on the first request and
+    kept: the scene of a running daemon never changes."""
+
+    async def served() -> tuple[list, dict]:
+        async with Api() as api:
+            assert "scene_text" not in vars(api.session)
+            bodies = []
+            for _ in range(3):
+                async with api.http.get(api.url + "/api/scene") as answer:
+                    assert answer.status == 200 and answer.content_type == "application/json"
+                    bodies.append(await answer.json())
+            assert "scene_text" in vars(api.session)
+            return bodies, json.loads(json.dumps(plain(api.scene)))
+
+    bodies, expected = run(served())
+    assert bodies == [expected] * 3 and expected["name"] == "rescue-live"
