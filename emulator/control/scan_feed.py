@@ -61,12 +61,13 @@ class ScanFeed:
         self._daemon = daemon
         self._serializer = serializer
         self._clock_changed = clock_changed
+        self._specs = {spec.name: spec for spec in daemon.scene.sensors}
         self._subscribers: dict[str, set[Subscriber]] = {}
         self._tasks: dict[str, asyncio.Task] = {}
         self._served: dict[str, tuple[Scan, float, str]] = {}  # per sensor: what `latest` served last (cache's scan, time, text)
 
     def spec(self, name: str) -> SensorSpec | None:
-        return next((spec for spec in self._daemon.scene.sensors if spec.name == name), None)
+        return self._specs.get(name)
 
     def serves(self, name: str) -> bool:
         """Whether this daemon computes the sensor's scans (a fleet's daemon serves only its group)."""

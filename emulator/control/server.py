@@ -268,6 +268,7 @@ class ControlServer:
             raise ControlError(400, "subscribe: expected {\"subscribe\": [sensor names]} alone", "subscribe")
         if not isinstance(names, list) or not all(isinstance(name, str) for name in names):
             raise ControlError(400, "subscribe: expected a list of sensor names", "subscribe")
+        names = list(dict.fromkeys(names))  # a 64 KiB message may name one sensor 6000 times: each is checked once
         for name in names:
             self._check_sensor(name)
         self.feed.unsubscribe(client.offer)
