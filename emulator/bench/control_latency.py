@@ -15,7 +15,10 @@ world:
 - a 100 Hz pose stream's cost: MD scan-to-scan jitter |Δt − 100 ms| (p99),
   alone and while a WebSocket client sends 100 poses a second that move the
   crate in and out of the beam plane (target: p99 still ≤ 2 ms), and the CPU
-  the daemon and its workers use meanwhile (/proc/PID/stat).
+  the daemon and its workers use meanwhile (/proc/PID/stat);
+- a flooding client's cost: the same jitter while another process sends region
+  changes on one WebSocket as fast as it can (beyond 125 a second they are
+  refused and paced: control/change_rate.py), with the changes sent and applied.
 """
 
 from __future__ import annotations
@@ -23,10 +26,12 @@ from __future__ import annotations
 import asyncio
 import http.client
 import json
+import multiprocessing
 import random
 import tempfile
 import threading
 import time
+import urllib.request
 from pathlib import Path
 from urllib.parse import urlsplit
 
@@ -144,14 +149,8 @@ def _percentiles(values: list[float]) -> dict[str, float]:
     }
 
 
-def jitter_with_pose_stream(daemon: ServeProcess, scans: int, stream: bool) -> dict:
-    """MD scan-to-scan jitter over `scans` scans, with or without a 100 Hz WebSocket pose stream."""
-    stop = threading.Event()
-    sent = [0]
-    thread = threading.Thread(target=lambda: asyncio.run(_pose_stream(daemon.control_url, stop, sent)), daemon=True)
-    if stream:
-        thread.start()
-        time.sleep(0.5)
+def _md_jitter(daemon: ServeProcess, scans: int) -> dict:
+    """MD scan-to-scan jitter |Δt − 100 ms| over `scans` scans, and the CPU the daemon and its workers used."""
     line = _Line(daemon.endpoint("urg", "tcp").uri)
     buffer = bytearray()
     try:
@@ -163,18 +162,78 @@ def jitter_with_pose_stream(daemon: ServeProcess, scans: int, stream: bool) -> d
         line.write(b"QT\n")
     finally:
         line.close()
-        stop.set()
-        if stream:
-            thread.join(5)
-    periods_ms = np.diff(arrivals) * 1000
-    deviations = np.abs(periods_ms - SCAN_PERIOD_MS)
+    deviations = np.abs(np.diff(arrivals) * 1000 - SCAN_PERIOD_MS)
     return {
         "scans": scans,
-        "poses_sent": sent[0],
         "cpu_share": round(cpu_share, 4),  # daemon + workers, CPU seconds per wall second
         "p99_ms": round(float(np.percentile(deviations, 99)), 3),
         "max_ms": round(float(deviations.max()), 3),
     }
+
+
+def jitter_with_pose_stream(daemon: ServeProcess, scans: int, stream: bool) -> dict:
+    """MD scan-to-scan jitter over `scans` scans, with or without a 100 Hz WebSocket pose stream."""
+    stop = threading.Event()
+    sent = [0]
+    thread = threading.Thread(target=lambda: asyncio.run(_pose_stream(daemon.control_url, stop, sent)), daemon=True)
+    if stream:
+        thread.start()
+        time.sleep(0.5)
+    try:
+        jitter = _md_jitter(daemon, scans)
+    finally:
+        stop.set()
+        if stream:
+            thread.join(5)
+    return {**jitter, "poses_sent": sent[0]}
+
+
+def jitter_with_change_flood(daemon: ServeProcess, scans: int) -> dict:
+    """MD jitter while another process sends region changes on one WebSocket as fast as it can: what a
+    flooding client costs its neighbours when every change beyond the per-thing rate is refused and paced
+    (control/change_rate.py). Also the changes sent (written into the socket: most wait in its buffers)
+    and applied while it flooded, and the applied rate."""
+    context = multiprocessing.get_context("spawn")
+    sent = context.Value("q", 0)
+    flooder = context.Process(target=flood_changes, args=(daemon.control_url, sent), daemon=True)
+    applied_before = _region_changes(daemon)
+    flooder.start()
+    try:
+        while sent.value == 0 and flooder.is_alive():  # the flood is on before the scans are timed
+            time.sleep(0.01)
+        flood_start = time.monotonic()
+        time.sleep(0.5)
+        jitter = _md_jitter(daemon, scans)
+        applied, changes_sent = _region_changes(daemon) - applied_before, sent.value
+        flood_s = time.monotonic() - flood_start
+    finally:  # no close handshake: the daemon reads its way to it at the paced rate, past this measurement
+        flooder.kill()
+        flooder.join()
+    return {**jitter, "changes_sent": changes_sent, "changes_applied": applied, "applied_per_s": round(applied / flood_s, 1)}
+
+
+def _region_changes(daemon: ServeProcess) -> int:
+    with urllib.request.urlopen(daemon.control_url + "/api/events", timeout=10) as answer:
+        return sum(event["op"] == "region" for event in json.loads(answer.read()))
+
+
+def flood_changes(url: str, sent) -> None:
+    """A flooding client (a process of its own, killed when done): region changes toggling the room between
+    clear and DENSE, as fast as its WebSocket takes them; `sent` counts them."""
+    asyncio.run(_flood_changes(url, sent))
+
+
+async def _flood_changes(url: str, sent) -> None:
+    import aiohttp
+
+    async with aiohttp.ClientSession() as session:
+        async with session.ws_connect(url + "/api/ws") as ws:
+            asyncio.ensure_future(_drain(ws))
+            while True:
+                for _ in range(50):
+                    await ws.send_str(json.dumps({"op": "region", "name": "room", "density": DENSE * (sent.value % 2)}))
+                    sent.value += 1
+                await asyncio.sleep(0)  # the reader drains the refusals meanwhile
 
 
 async def _pose_stream(url: str, stop: threading.Event, sent: list[int]) -> None:
@@ -208,7 +267,11 @@ def control_bench(quick: bool = False) -> tuple[dict, list[str]]:
             latency = change_to_scan(daemon, changes)
             alone = jitter_with_pose_stream(daemon, scans, stream=False)
             streamed = jitter_with_pose_stream(daemon, scans, stream=True)
-    data = {"change_to_scan": latency, "control_jitter": {"alone": alone, "pose_stream_100hz": streamed}}
+            flooded = jitter_with_change_flood(daemon, scans)
+    data = {
+        "change_to_scan": latency,
+        "control_jitter": {"alone": alone, "pose_stream_100hz": streamed, "change_flood": flooded},
+    }
     wall, sim = latency["wall"], latency["simulated"]
     lines = [
         f"change → first MD scan showing it ({changes} density changes), target: within one scan period (100 ms)",
@@ -221,5 +284,8 @@ def control_bench(quick: bool = False) -> tuple[dict, list[str]]:
         f"   CPU (daemon + workers) {alone['cpu_share']:.1%} of a core",
         f"  with a 100 Hz pose stream p99 {streamed['p99_ms']:.3f} ms   max {streamed['max_ms']:.3f} ms"
         f"   CPU {streamed['cpu_share']:.1%} of a core ({streamed['poses_sent']} poses sent)",
+        f"  with a change flood       p99 {flooded['p99_ms']:.3f} ms   max {flooded['max_ms']:.3f} ms"
+        f"   CPU {flooded['cpu_share']:.1%} of a core ({flooded['changes_sent']} region changes sent,"
+        f" {flooded['changes_applied']} applied: {flooded['applied_per_s']:g} a second)",
     ]
     return data, lines

@@ -74,6 +74,8 @@ def test_bench_json_reports_every_bundled_sensor_and_every_section():
     assert changes["violations"] == 0  # no scan stamped after a change shows the world before it
     assert 0 <= changes["simulated"]["p50_ms"] <= changes["simulated"]["max_ms"]
     assert report["control_jitter"]["pose_stream_100hz"]["poses_sent"] > 0
+    flood = report["control_jitter"]["change_flood"]  # beyond the change rate most are refused
+    assert flood["changes_sent"] > flood["changes_applied"] > 0 and flood["p99_ms"] >= 0
     # what watching costs: view off, view unwatched, view in chromium (twice: nice 0 and 19), --mcap
     assert [row["case"] for row in report["view"]] == [
         "view off", "view, no browser", "view + chromium", "view + chromium nice 19", "--mcap"]
