@@ -40,8 +40,7 @@ class LiveSession:
     def __init__(self, daemon: Daemon, writer: EventWriter | None = None) -> None:
         self.daemon = daemon
         self.scene: Scene = daemon.scene
-        self.events: collections.deque[LiveEvent] = collections.deque(maxlen=EVENTS_SHOWN)
-        self._event_texts: collections.deque[str] = collections.deque(maxlen=EVENTS_SHOWN)  # `events`, as JSON
+        self._shown: collections.deque[tuple[LiveEvent, str]] = collections.deque(maxlen=EVENTS_SHOWN)  # each with its JSON
         self.applied = 0  # events applied in all
         self.limits = LiveLimits(self.scene)  # the scene file's limits, for every change in turn
         self._writer = writer
@@ -67,8 +66,7 @@ class LiveSession:
             event = self.daemon.apply(event)
         except ValueError as error:
             raise ControlError(409, str(error), f"bodies[{event.name}]") from None
-        self.events.append(event)
-        self._event_texts.append(json.dumps(event_json(event)))
+        self._shown.append((event, json.dumps(event_json(event))))
         self.applied += 1
         record(self.limits, event)
         if self.daemon.live is not None:
@@ -85,9 +83,14 @@ class LiveSession:
 
     # ----------------------------------------------------------------------- what the API shows
 
+    @property
+    def events(self) -> list[LiveEvent]:
+        """The last EVENTS_SHOWN events applied, oldest first."""
+        return [event for event, _ in self._shown]
+
     def event_log_text(self) -> str:
         """`GET /api/events`: the events kept, as one JSON array."""
-        return "[" + ", ".join(self._event_texts) + "]"
+        return "[" + ", ".join(text for _, text in self._shown) + "]"
 
     def state(self) -> dict[str, Any]:
         """`GET /api/state`: the clock, and what holds now of every live quantity."""
