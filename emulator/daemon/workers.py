@@ -368,8 +368,7 @@ class WorkerPool:
         for worker in workers:
             if worker.outbox is not None:
                 _discard_waiting(worker.outbox)  # what is not sent yet no longer matters: stop goes next
-                worker.outbox.put(("stop",))
-                worker.outbox.put(None)
+                worker.outbox.put(("stop",))  # its sender leaves on the None `_retire_sender` adds
         with self._lock:
             self._scheduler.cancel_all()
         for worker in workers:
