@@ -20,7 +20,14 @@ too (40 000 refused WebSocket messages a second took a core): the refusal is
 answered when the thing's next token is due, and a WebSocket client's further
 messages are not read before then, so a client sending as fast as it can is
 paced to about the rate by its own connection's back-pressure, at no cost to
-the daemon while it waits. Replayed event logs (`--events-in`) are not front-end
+the daemon while it waits. But pacing alone let a killed flooder's backlog,
+held in the kernel's socket buffers, go on being applied at the rate for as
+long as it took to read (a 5 s flood: 7 s more of changes after its client
+was killed). So each WebSocket connection also has a budget of refusals
+(REFUSALS_BURST, refilled at REFUSALS_RATE_HZ): a client sending up to about
+1.5x the rate never spends it, one sending as fast as it can spends it in
+about 4 s and is closed (1008, policy violation), its backlog unread.
+Replayed event logs (`--events-in`) are not front-end
 commands and are not limited. The values of changes are held to the scene
 file's limits (scene/live_limits.py).
 """
@@ -35,6 +42,11 @@ from emulator.scene.model import Scene
 
 CHANGE_RATE_HZ = 125.0  # sustained changes a second per thing changed: a 100 Hz bridge with 25 % to spare
 CHANGE_BURST = 25  # changes one thing may take at once (a bridge that caught up after a stall)
+# Refusals one WebSocket connection may draw before it is closed: a flooder paced to the rate is refused
+# about CHANGE_RATE_HZ times a second, a client sending 1.5x the rate about half that.
+REFUSALS_RATE_HZ = CHANGE_RATE_HZ / 2
+REFUSALS_BURST = 250
+FLOODING_REASON = f"more than {REFUSALS_BURST} changes refused past the rate; closed"
 
 
 class TokenBucket:

@@ -25,12 +25,12 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Awaitable, Callable
 
-from aiohttp import WSMsgType, web
+from aiohttp import WSCloseCode, WSMsgType, web
 
 from emulator.control.events import ControlError, event_json
 from emulator.control.scan_feed import ScanFeed
 from emulator.control.session import LiveSession
-from emulator.control.change_rate import ChangeRate, changeable
+from emulator.control.change_rate import FLOODING_REASON, REFUSALS_BURST, REFUSALS_RATE_HZ, ChangeRate, TokenBucket, changeable
 from emulator.errors import UserError
 from emulator.scene.live import ClockChange, LiveEvent
 
@@ -101,6 +101,7 @@ class ControlServer:
     ) -> None:
         self.session = session
         self.changes = ChangeRate(changeable(session.scene), rate_clock)  # per thing changed: control/change_rate.py
+        self._rate_clock = rate_clock
         self.address = address
         self._token = token
         self._serializer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="control-json")
@@ -227,7 +228,7 @@ class ControlServer:
         connection = request.transport.get_extra_info("socket") if request.transport is not None else None
         if connection is not None:
             connection.setsockopt(SOL_SOCKET, SO_SNDBUF, CLIENT_SEND_BUFFER_BYTES)
-        client = _Client(socket, request.transport, self._drop)
+        client = _Client(socket, request.transport, self._drop, TokenBucket(REFUSALS_RATE_HZ, REFUSALS_BURST, self._rate_clock()))
         self._clients.add(client)
         client.offer(self._state_message())
         try:
@@ -236,6 +237,10 @@ class ControlServer:
                     client.offer(_error_message(ControlError(400, "expected a text message holding a JSON object")))
                     continue
                 if (pause_s := self._on_message(client, message.data)) > 0:
+                    if not client.refusals.take(self._rate_clock()):
+                        log.info("control: a WebSocket client kept sending changes past the rate; closed")
+                        await client.close_flooding()
+                        break
                     await asyncio.sleep(pause_s)  # this client's next message waits for the next token
         finally:
             self._drop(client)
@@ -320,8 +325,10 @@ class _Client:
     """One WebSocket client: outgoing messages through a bounded queue, written by its own task."""
 
     def __init__(
-        self, socket: web.WebSocketResponse, transport: asyncio.BaseTransport | None, on_drop: Callable[[_Client], None]
+        self, socket: web.WebSocketResponse, transport: asyncio.BaseTransport | None, on_drop: Callable[[_Client], None],
+        refusals: TokenBucket,
     ) -> None:
+        self.refusals = refusals  # what this connection may be refused before it is closed (control/change_rate.py)
         self._socket = socket
         self._transport = transport
         self._on_drop = on_drop
@@ -359,6 +366,16 @@ class _Client:
     async def close(self) -> None:
         self._writer.cancel()
         await self._socket.close()
+
+    async def close_flooding(self) -> None:
+        """Closed with 1008 and the reason, then reset: a flooder's backlog is never read, and one that
+        does not answer the close within CLOSE_TIMEOUT_S cannot hold the connection open."""
+        self._writer.cancel()
+        try:
+            await asyncio.wait_for(self._socket.close(code=WSCloseCode.POLICY_VIOLATION, message=FLOODING_REASON.encode()), CLOSE_TIMEOUT_S)
+        except (asyncio.TimeoutError, ConnectionError, RuntimeError):
+            pass
+        self.reset()
 
 
 async def _json_body(request: web.Request) -> Any:

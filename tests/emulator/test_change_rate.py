@@ -6,9 +6,12 @@ from __future__ import annotations
 import json
 
 import pytest
+from aiohttp import WSCloseCode, WSMsgType
 from test_twist import Api, run
 
-from emulator.control.change_rate import CHANGE_BURST, CHANGE_RATE_HZ, ChangeRate, TokenBucket, changeable
+from emulator.control.change_rate import (
+    CHANGE_BURST, CHANGE_RATE_HZ, FLOODING_REASON, REFUSALS_BURST, ChangeRate, TokenBucket, changeable,
+)
 from emulator.scene import load_scene
 
 
@@ -129,3 +132,58 @@ def test_the_api_refuses_a_flood_per_body_over_http_and_websocket_and_changes_no
     assert [error["status"] for error in errors] == [429, 429] and errors[0]["key"] == "bodies[robot].twist"
     assert after == CHANGE_BURST + 12  # the 12 the refill allowed, not the 13th
 
+
+
+async def _send_and_settle(api: Api, ws, messages: list) -> int:
+    """Send one change and wait until the daemon has applied it or answered it with an error: the test's
+    clock then stands where the daemon read it. How many errors came back (0 or 1)."""
+    before = len(api.session.events)
+    await ws.send_json({"op": "region", "name": "east_room", "density": 0.5})
+    while len(api.session.events) == before:
+        try:
+            message = await ws.receive(timeout=0.001)
+        except TimeoutError:
+            continue
+        messages.append(message)
+        if message.type != WSMsgType.TEXT or json.loads(message.data)["type"] == "error":
+            return 1
+    return 0
+
+
+def test_a_websocket_client_refused_past_its_budget_is_closed_unread_and_one_at_1_4x_the_rate_is_not() -> None:
+    """A flooder (every change at one wall instant) is closed with 1008 once REFUSALS_BURST changes have been
+    refused: what it sent after is never applied. A client at 1.4x the rate for 10 s is refused about 500
+    times, twice the burst, and stays: the refill (REFUSALS_RATE_HZ) outpaces its refusals."""
+    clock = Tick()
+
+    async def flood() -> tuple[list, int]:
+        async with Api(rate_clock=clock) as api:
+            async with api.http.ws_connect(api.url + "/api/ws") as ws:
+                assert json.loads((await ws.receive(timeout=5)).data)["type"] == "state"
+                for _ in range(CHANGE_BURST + REFUSALS_BURST + 50):
+                    await ws.send_json({"op": "region", "name": "east_room", "density": 0.5})
+                messages = []
+                while (message := await ws.receive(timeout=10)).type == WSMsgType.TEXT:
+                    messages.append(json.loads(message.data))
+                return [*messages, message], len(api.session.events)
+
+    async def steady() -> tuple[int, int, bool]:
+        async with Api(rate_clock=clock) as api:
+            async with api.http.ws_connect(api.url + "/api/ws") as ws:
+                messages: list = []
+                refused = 0
+                for _ in range(1750):
+                    clock.now += 1.0 / (1.4 * CHANGE_RATE_HZ)
+                    refused += await _send_and_settle(api, ws, messages)
+                return refused, len(api.session.events), all(message.type == WSMsgType.TEXT for message in messages)
+
+    messages, applied = run(flood())
+    errors = [message for message in messages[:-1] if message["type"] == "error"]
+    assert messages[-1].type == WSMsgType.CLOSE and messages[-1].data == WSCloseCode.POLICY_VIOLATION, messages[-1]
+    assert messages[-1].extra == FLOODING_REASON
+    assert applied == CHANGE_BURST  # none of the 50 after the close
+    assert len(errors) <= REFUSALS_BURST + 1 and all(error["status"] == 429 for error in errors)
+    refused, applied, stayed = run(steady())
+    assert stayed, "the connection was closed"
+    assert 2 * REFUSALS_BURST - 50 <= refused <= 2 * REFUSALS_BURST + 50, refused
+    assert refused + applied == 1750

@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 from emulator.bench.serve_process import ServeProcess, serve_command
-from emulator.control.change_rate import CHANGE_BURST, CHANGE_RATE_HZ
+from emulator.control.change_rate import CHANGE_BURST, CHANGE_RATE_HZ, FLOODING_REASON
 from emulator.scene import load_scene
 from emulator.scene.loader import MAX_BODY_SPEED_M_S, MAX_DENSITY, MAX_PARTICLES_ALIVE
 from tests.robustness.conftest import SCALE
@@ -214,8 +214,8 @@ FLOODS = {
 
 
 async def _flood_websocket(url: str, flood_s: float, change: str) -> tuple[int, list[dict]]:
-    """Changes at up to 5 kHz (40 times the rate), reading the answers meanwhile; at the end the close
-    handshake is not waited for (the daemon reads what is still queued on its own pace)."""
+    """Changes at up to 5 kHz (40 times the rate), reading the answers meanwhile, until `flood_s` is over
+    or the daemon closes the connection (past its refusal budget); the close handshake is not waited for."""
     sent, errors = 0, []
     message = FLOODS[change][0]
     close = aiohttp.ClientWSTimeout(ws_close=0.5)
@@ -228,8 +228,11 @@ async def _flood_websocket(url: str, flood_s: float, change: str) -> tuple[int, 
 
         reader = asyncio.create_task(read())
         end = time.monotonic() + flood_s
-        while time.monotonic() < end:
-            await ws.send_json(message)
+        while time.monotonic() < end and not ws.closed:  # past its refusal budget the daemon closes it
+            try:
+                await ws.send_json(message)
+            except ConnectionError:
+                break
             sent += 1
             if sent % 50 == 0:
                 await asyncio.sleep(0.01)  # and let the reader keep up
@@ -363,3 +366,64 @@ def test_a_websocket_client_with_a_backlog_of_twists_does_not_hold_the_daemon_at
             assert served.stop(timeout_s=10.0) == 0, served.stderr
         finally:
             flooder.close()
+
+
+def _websocket_frames(data: bytes) -> list[tuple[int, bytes]]:
+    """(opcode, payload) of the server's unmasked frames in `data`, a torn last one left out."""
+    frames, at = [], 0
+    while at + 2 <= len(data):
+        opcode, length, at = data[at] & 0x0F, data[at + 1] & 0x7F, at + 2
+        if length >= 126:
+            size = 2 if length == 126 else 8
+            length, at = int.from_bytes(data[at:at + size], "big"), at + size
+        if at + length > len(data):
+            break
+        frames.append((opcode, data[at:at + length]))
+        at += length
+    return frames
+
+
+def test_a_flooders_backlog_is_not_applied_once_it_is_closed() -> None:
+    """A client writes 20 000 region changes as fast as the socket takes them and never reads. Paced to
+    the rate alone, the daemon went on applying its backlog (held in the kernel's buffers) for as long as
+    it took to read: 7 s after a 5 s flood's client was killed. Now, refused past its budget
+    (REFUSALS_BURST, about 4 s of flooding), the connection is closed with 1008 and the reason, and no
+    change is applied after: the log holds at most the burst and 6 s of the rate, and stops growing."""
+    with ServeProcess("rescue-live", ["urg=tcp:127.0.0.1:0"]) as served:
+        url = served.control_url
+        flooder = socket.create_connection(("127.0.0.1", int(url.rsplit(":", 1)[1])))
+        flooder.sendall(
+            b"GET /api/ws HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+            b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n"
+        )
+        change = json.dumps({"op": "region", "name": "east_room", "density": 0.5}).encode()
+        backlog = (bytes([0x81, 0x80 | len(change)]) + b"\x00\x00\x00\x00" + change) * 20_000
+        flooder.setblocking(False)
+        began = time.monotonic()
+        written = 0
+        while written < len(backlog) and time.monotonic() - began < 2.0:  # what the buffers hold, 2 s at most
+            try:
+                written += flooder.send(backlog[written:written + 65536])
+            except BlockingIOError:
+                time.sleep(0.005)
+        time.sleep(max(0.0, began + 7.0 - time.monotonic()))
+        received = b""
+        flooder.settimeout(5.0)
+        try:
+            while chunk := flooder.recv(1 << 16):
+                received += chunk
+        except (ConnectionResetError, socket.timeout):
+            pass
+        flooder.close()
+        counts = []
+        for _ in range(2):
+            with urllib.request.urlopen(url + "/api/events", timeout=10) as answer:
+                counts.append(sum(1 for event in json.loads(answer.read()) if event["op"] == "region"))
+            time.sleep(1.0)
+    frames = _websocket_frames(received.split(b"\r\n\r\n", 1)[1])
+    closes = [payload for opcode, payload in frames if opcode == 0x8]
+    written_changes = written // (len(backlog) // 20_000)
+    assert closes and int.from_bytes(closes[0][:2], "big") == 1008, (written_changes, frames[-3:])
+    assert closes[0][2:].decode() == FLOODING_REASON
+    assert counts[0] == counts[1], f"changes still applied after the close: {counts}"
+    assert counts[0] <= CHANGE_BURST + 6.0 * CHANGE_RATE_HZ < written_changes, (counts, written_changes)
