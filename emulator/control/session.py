@@ -116,8 +116,9 @@ class LiveSession:
             for plume in self.scene.plumes:
                 state["plumes"][plume.name] = live.plume_state(plume.name, now)
         counters = self.daemon.sensor_counters()
+        clients = self.daemon.client_counts()
         for spec in self.scene.sensors:
-            state["sensors"][spec.name] = {"pose": pose_json(spec.pose), "clients": self.daemon.clients(spec.name)}
+            state["sensors"][spec.name] = {"pose": pose_json(spec.pose), "clients": clients[spec.name]}
             if spec.name in counters:  # behind: scans sent after a fresher one was due, and never sent
                 state["sensors"][spec.name] |= {key: counters[spec.name][key] for key in ("late", "skipped")}
         return state

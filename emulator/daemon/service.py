@@ -31,6 +31,7 @@ import math
 import os
 import sys
 import weakref
+from collections import Counter
 from concurrent.futures import Executor, Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Protocol, Sequence
@@ -617,9 +618,10 @@ class Daemon:
                 scans.invalidate_from(changed_from_s)
         return event
 
-    def clients(self, sensor: str) -> int:
-        """How many clients are connected to the sensor's endpoints."""
-        return sum(1 for name, endpoint in self._endpoint_sensors if name == sensor and endpoint.link is not None)
+    def client_counts(self) -> Counter[str]:
+        """How many clients are connected to each sensor's endpoints, in one pass over them (asked per
+        sensor, a 256-sensor fleet's state took 2 ms of the loop)."""
+        return Counter(name for name, endpoint in self._endpoint_sensors if endpoint.link is not None)
 
     def close(self) -> None:
         for session in self.sessions:

@@ -371,6 +371,29 @@ def test_ctl_says_what_went_wrong_in_one_line_and_exits_2(daemon: ServeProcess) 
     assert len(piped.stdout.splitlines()) == 1 and piped.stderr == "", piped.stderr
 
 
+def test_the_state_counts_each_sensors_clients(daemon: ServeProcess) -> None:
+    """A client on the URG's TCP endpoint, then one on the LMS's too: the state counts each sensor's own
+    (an endpoint is a serial line: one client at a time), and 0 once they leave."""
+    def settled(expected: dict[str, int]) -> dict[str, int]:
+        deadline = time.monotonic() + 10.0
+        while True:
+            state = call(daemon.control_url, "GET", "/api/state")[1]
+            counted = {name: sensor["clients"] for name, sensor in state["sensors"].items()}
+            if counted == expected or time.monotonic() > deadline:
+                return counted
+            time.sleep(0.05)
+
+    connections = [socket.create_connection(daemon.endpoint("urg", "tcp").address)]
+    try:
+        assert settled({"urg": 1, "lms": 0}) == {"urg": 1, "lms": 0}
+        connections.append(socket.create_connection(daemon.endpoint("lms", "tcp").address))
+        assert settled({"urg": 1, "lms": 1}) == {"urg": 1, "lms": 1}
+    finally:
+        for connection in connections:
+            connection.close()
+    assert settled({"urg": 0, "lms": 0}) == {"urg": 0, "lms": 0}
+
+
 def test_a_fleet_daemon_refuses_scans_of_sensors_it_does_not_serve(room: Path) -> None:
     with ServeProcess(room, ENDPOINTS[:1], extra_args=("--sensors", "urg", "--control", "127.0.0.1:0")) as daemon:
         status, answer = call(daemon.control_url, "GET", "/api/sensors/lms/scan")
