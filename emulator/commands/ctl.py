@@ -24,36 +24,37 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--token", default=None, help="Bearer token, if serve has --control-token")
     actions = parser.add_subparsers(dest="action", metavar="ACTION", parser_class=type(parser))
     actions.required = True
-    actions.add_parser("state", help="print the live state as JSON")
-    setter = actions.add_parser("set", help="set a smoke region's density: set region NAME density D")
-    setter.add_argument("what", choices=["region"])
-    setter.add_argument("name")
-    setter.add_argument("key", choices=["density"])
-    setter.add_argument("value", type=float)
-    plume = actions.add_parser("plume", help="plume NAME on|off|rate R|wind X Y Z")
-    plume.add_argument("name")
+    def action(name: str, help_text: str) -> argparse.ArgumentParser:
+        return actions.add_parser(name, help=help_text, description=help_text)
+
+    action("state", "print the live state as JSON")
+    setter = action("set", "set a smoke region's density: set region NAME density D")
+    setter.add_argument("what", choices=["region"], help="what to set (a smoke region)")
+    setter.add_argument("name", metavar="NAME", help="the region's name in the scene")
+    setter.add_argument("key", choices=["density"], help="the quantity to set")
+    setter.add_argument("value", type=float, metavar="D", help="the new density (as in the scene file: 0.002 is a light haze)")
+    plume = action("plume", "switch a plume on or off, or change its rate or wind: plume NAME on|off|rate R|wind X Y Z")
+    plume.add_argument("name", metavar="NAME", help="the plume's name in the scene")
     plume.add_argument("change", choices=["on", "off", "rate", "wind"])
-    plume.add_argument("values", nargs="*", type=float)
-    pose = actions.add_parser("pose", help="pose BODY X Y [Z] [--yaw DEG]")
-    pose.add_argument("name")
-    pose.add_argument("position", nargs="+", type=float, metavar="X")
-    pose.add_argument("--yaw", type=float, default=0.0, metavar="DEG")
-    twist = actions.add_parser(
-        "twist", help="twist BODY VX [VY] WZ [--for S]: drive a live body (m/s forward and left, rad/s counter-clockwise)"
-    )
+    plume.add_argument("values", nargs="*", type=float, metavar="VALUE", help="R (particles a second) or X Y Z (m/s)")
+    pose = action("pose", "move a live body: pose BODY X Y [Z] [--yaw DEG]")
+    pose.add_argument("name", metavar="BODY", help="a body with trajectory = \"live\"")
+    pose.add_argument("position", nargs="+", type=float, metavar="COORD", help="X Y [Z] in metres, in the scene's frame")
+    pose.add_argument("--yaw", type=float, default=0.0, metavar="DEG", help="heading, degrees counter-clockwise (default 0)")
+    twist = action("twist", "twist BODY VX [VY] WZ [--for S]: drive a live body (m/s forward and left, rad/s counter-clockwise)")
     twist.add_argument("name", metavar="BODY", help="a body with trajectory = \"live\"")
     twist.add_argument("velocity", nargs="+", type=float, metavar="V",
                        help="VX WZ (a differential drive) or VX VY WZ: m/s forward, m/s to the left, rad/s counter-clockwise")
     twist.add_argument("--for", dest="duration", type=float, default=None, metavar="S",
                        help="keep sending it for S wall seconds (else one command: the body stops after its watchdog)")
-    clock = actions.add_parser("clock", help="clock [--speed X] [--pause|--resume]")
-    clock.add_argument("--speed", type=float, default=None)
+    clock = action("clock", "change the simulated clock: clock [--speed X] [--pause|--resume]")
+    clock.add_argument("--speed", type=float, default=None, metavar="X", help="simulated seconds per wall second")
     running = clock.add_mutually_exclusive_group()
-    running.add_argument("--pause", action="store_true")
-    running.add_argument("--resume", action="store_true")
-    watch = actions.add_parser("watch", help="watch SENSOR: a line per scan")
-    watch.add_argument("sensor")
-    watch.add_argument("--count", type=int, default=None, help="stop after N scans")
+    running.add_argument("--pause", action="store_true", help="stop simulated time (devices then send nothing new)")
+    running.add_argument("--resume", action="store_true", help="let simulated time run again")
+    watch = action("watch", "watch SENSOR: a line per scan, until interrupted or --count scans")
+    watch.add_argument("sensor", metavar="SENSOR", help="a sensor's name in the scene")
+    watch.add_argument("--count", type=positive_count, default=None, metavar="N", help="stop after N scans")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -117,3 +118,14 @@ def _twist(client: ControlClient, args: argparse.Namespace) -> int:
             answer = client.twist(args.name, vx, vy, wz)
         print(f"last {json.dumps(answer['applied'])}, at {json.dumps(answer['state']['bodies'][args.name])}")
     return 0
+
+
+def positive_count(text: str) -> int:
+    """An argparse type: a whole number of at least 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
+    return value

@@ -9,6 +9,7 @@ one line on stderr and exit status 2 (a `UserError`).
 from __future__ import annotations
 
 import asyncio
+import http.client
 import json
 import math
 import os
@@ -45,10 +46,12 @@ class ControlClient:
             with urllib.request.urlopen(request, timeout=TIMEOUT_S) as answer:
                 return json.loads(answer.read())
         except urllib.error.HTTPError as error:
-            raise UserError(f"{error.code}: {_error_text(error.read())}") from None
+            raise UserError(f"{error.code}: {_error_text(error.read(), error.reason)}") from None
         except (urllib.error.URLError, OSError) as error:
             reason = getattr(error, "reason", error)
             raise UserError(f"cannot reach the control API at {self.url}: {reason}") from None
+        except http.client.HTTPException:  # not HTTP at all: a device's port, say
+            raise UserError(f"{self.url} does not answer HTTP: is it the control API's address (serve prints 'ready control URL')?") from None
         except ValueError:
             raise UserError(f"{self.url}{path}: the answer is not JSON") from None
 
@@ -152,9 +155,12 @@ def _quote(name: str) -> str:
     return urllib.request.quote(name, safe="")
 
 
-def _error_text(raw: bytes) -> str:
+def _error_text(raw: bytes, reason: object = "") -> str:
+    """The API's own words, else the answer's text, else its status line's reason: a server that is not
+    the control API (the browser view's port, say) may answer with an empty body."""
     try:
         data = json.loads(raw)
-        return str(data.get("error", data))
+        return str(data.get("error", data)) if isinstance(data, dict) else str(data)
     except ValueError:
-        return raw.decode("utf-8", "replace")[:200]
+        text = raw.decode("utf-8", "replace").strip()[:200]
+        return text or f"{reason} (is this the control API's address? serve prints 'ready control URL')"

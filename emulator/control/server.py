@@ -85,6 +85,8 @@ def parse_control_address(text: str) -> ControlAddress | None:
 
 def check_exposure(address: ControlAddress | None, token: str | None) -> None:
     """A control API beyond loopback changes the world for anyone who reaches it: it needs a token."""
+    if token is not None and not token.strip():
+        raise UserError("--control-token: expected a token, got an empty one (leave the option out for none on loopback)")
     if address is not None and not address.loopback and not token:
         raise UserError(
             f"--control {address.host}:{address.port} is not a loopback address: give --control-token TOKEN "
@@ -244,6 +246,7 @@ class ControlServer:
                     await asyncio.sleep(pause_s)  # this client's next message waits for the next token
         finally:
             self._drop(client)
+            client.stop_writing()
         return socket
 
     def _on_message(self, client: _Client, text: str) -> float:
@@ -346,6 +349,11 @@ class _Client:
             self.dropped = True
             self._on_drop(self)
             self.reset()
+
+    def stop_writing(self) -> None:
+        """Its writer ended (the connection is over): a task left waiting on the queue would be
+        destroyed pending when the loop collects it, with a warning on the daemon's stderr."""
+        self._writer.cancel()
 
     def reset(self) -> None:
         """The connection reset at once, discarding what the kernel still holds for it either way."""

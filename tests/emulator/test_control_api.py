@@ -13,6 +13,7 @@ import asyncio
 import json
 import math
 import shlex
+import signal
 import socket
 import subprocess
 import time
@@ -369,6 +370,25 @@ def test_ctl_says_what_went_wrong_in_one_line_and_exits_2(daemon: ServeProcess) 
         shell=True, capture_output=True, text=True, timeout=30,
     )
     assert len(piped.stdout.splitlines()) == 1 and piped.stderr == "", piped.stderr
+    wrong_port = ctl("state", url=f"http://127.0.0.1:{daemon.endpoint('urg', 'tcp').address[1]}")  # a device's port
+    assert wrong_port.returncode == 2 and wrong_port.stderr.count("\n") == 1 and "does not answer HTTP" in wrong_port.stderr
+    assert ctl("watch", "lms", "--count", "0").returncode == 2
+
+
+def test_watchers_that_go_away_leave_the_daemon_quiet(room: Path) -> None:
+    """`ctl watch` stopped by ^C, SIGTERM or SIGKILL (no close handshake): the daemon's writer task for
+    each is ended with the connection (left waiting, each was later destroyed pending, with a warning
+    on the daemon's stderr), and the daemon serves on and stops cleanly."""
+    with ServeProcess(room, ENDPOINTS) as daemon:
+        for stop in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL) * 2:
+            watcher = subprocess.Popen([*serve_command(), "ctl", "--url", daemon.control_url, "watch", "lms"], stdout=subprocess.PIPE)
+            assert watcher.stdout.readline()
+            watcher.send_signal(stop)
+            watcher.wait(timeout=30)
+            watcher.stdout.close()
+        assert call(daemon.control_url, "GET", "/api/state")[0] == 200
+        assert daemon.stop() == 0
+        assert "Task was destroyed" not in daemon.stderr and "Traceback" not in daemon.stderr, daemon.stderr
 
 
 def test_the_state_counts_each_sensors_clients(daemon: ServeProcess) -> None:
