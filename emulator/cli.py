@@ -1,6 +1,9 @@
-"""lrf-emulator: virtual Hokuyo URG-04LX and Sick LMS200 laser range finders in a smoky 3D scene.
+"""lrf-emulator: virtual laser range finders in a smoky 3D scene, served as the real ones are.
 
-Each subcommand lives in `emulator/commands/`; `lrf-emulator COMMAND --help` describes it.
+Hokuyo URG-04LX, UTM-30LX(-EW) and UST-10LX/20LX over SCIP; SICK LMS200 over
+its serial telegrams, TiM561/571/781, LMS111 and LMS511 over CoLa; on a
+virtual serial device, TCP or RFC 2217. `lrf-emulator COMMAND --help`
+describes each command.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ SUBCOMMANDS: dict[str, tuple[str, str]] = {
     "serve": ("serve", "serve the scene's sensors on their endpoints (the daemon)"),
     "scan": ("scan", "print one scan at a simulated time as JSON"),
     "plot": ("plot", "draw a waterfall of scans and the smoke level over time, or a map (PNG, SVG, PDF...)"),
-    "record": ("record", "write scans to a text log in the seed dataset's format"),
+    "record": ("record", "write scans to a file: a text log (with a TUM trajectory), MCAP, or a ROS 1 / ROS 2 bag"),
     "replay": ("replay", "serve a recorded log through the real protocol"),
     "bench": ("bench", "measure the simulation's and protocols' speed on this machine"),
     "scenes": ("scenes", "list the bundled scenes"),
@@ -47,6 +50,12 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # type: ignore[override]
         sys.stderr.write(f"{self.prog}: {message}\n")
         raise SystemExit(2)
+
+    def _get_values(self, action: argparse.Action, arg_strings: list[str]) -> object:
+        """`--option=--` is a value argparse (3.11) turns into [] for any type: refused as one."""
+        if action.option_strings and action.nargs is None and arg_strings == ["--"]:
+            self.error(f"argument {'/'.join(action.option_strings)}: expected a value, got '--'")
+        return super()._get_values(action, arg_strings)
 
 
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:

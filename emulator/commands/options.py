@@ -70,7 +70,17 @@ def add_span_options(
     parser.add_argument("--sensor", required=required, metavar="NAME", help=f"the scene's sensor to {verb}")
     parser.add_argument("--start", type=simulated_time, default=0.0, metavar="T0", help="first simulated time (s)")
     parser.add_argument("--end", type=simulated_time, required=required, metavar="T1", help="last simulated time (s)")
-    parser.add_argument("--out", required=True, type=Path, metavar=out_metavar, help=out_help)
+    parser.add_argument("--out", required=True, type=output_path, metavar=out_metavar, help=out_help)
+
+
+def output_path(text: str) -> Path:
+    """An argparse type: where to write, named (not empty) and not an existing directory."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a file name, got ''")
+    path = Path(text)
+    if path.is_dir() and not path.is_symlink():
+        raise argparse.ArgumentTypeError(f"{text} is an existing directory")
+    return path
 
 
 def add_events_in_option(parser: argparse.ArgumentParser, *names: str) -> None:

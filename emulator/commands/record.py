@@ -83,6 +83,9 @@ def run(args: argparse.Namespace) -> int:
     if first is None:
         raise UserError(f"no scan of {sensor.name} completes between {args.start} and {args.end} s")
     truth_path = ground_truth_path(args.out)
+    for path in (args.out, truth_path):
+        if path.is_symlink():
+            raise UserError(f"{path} is a symbolic link: record writes only files, never through links")
     try:
         with truth_path.open("w", encoding="ascii") as truth:
             every_scan = with_ground_truth(itertools.chain([first], scans), sensor, truth)

@@ -49,7 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--device", dest="model", required=True, choices=MODELS, help="the device to serve the log as")
     parser.add_argument(
         "--endpoint", action="append", default=[], metavar="URI",
-        help="pty:PATH or tcp:HOST:PORT (repeatable; default: a Hokuyo tcp:127.0.0.1:10940, lms200 pty:ttyLMS0,"
+        help="pty:PATH, tcp:HOST:PORT or rfc2217:HOST:PORT (repeatable; default: a Hokuyo tcp:127.0.0.1:10940, lms200 pty:ttyLMS0,"
              " a CoLa SICK tcp:127.0.0.1:2111)",
     )
 

@@ -24,6 +24,7 @@ from typing import Any, Mapping, Sequence
 
 from emulator.commands.options import (
     LOOPBACK_HOSTS,
+    MAX_SIMULATED_TIME_S,
     add_events_in_option,
     add_scene_options,
     parse_listen,
@@ -76,7 +77,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument(
         "--epoch",
-        type=float,
+        type=unix_time,
         metavar="UNIX_TIME",
         help="simulated time = (now − UNIX_TIME) × speed, so daemons given one epoch agree (default: start at 0)",
     )
@@ -122,6 +123,17 @@ def endpoint_overrides(items: list[str]) -> dict[str, list[str]]:
 MAX_SPEED = 1000.0  # simulated seconds per wall second: beyond this scans could not keep up anyway
 
 
+def unix_time(text: str) -> float:
+    """An argparse type: a finite UNIX time in seconds (NaN would stop every clock read)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected UNIX seconds, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite UNIX time, got {text!r}")
+    return value
+
+
 def run(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.speed) and 0 < args.speed <= MAX_SPEED):
         raise UserError(f"--speed must be > 0 and <= {MAX_SPEED:g}, got {args.speed}")
@@ -141,6 +153,11 @@ def run(args: argparse.Namespace) -> int:
         clock = WallClock.from_epoch(args.epoch, args.speed) if args.epoch is not None else WallClock(args.speed)
     except ValueError as error:
         raise UserError(f"--epoch: {error}") from None
+    if clock.now() > MAX_SIMULATED_TIME_S:
+        raise UserError(
+            f"--epoch: simulated time would start at {clock.now():.6g} s (the epoch's age × speed); "
+            f"at most {MAX_SIMULATED_TIME_S:g} s (115 days): give a more recent epoch"
+        )
     for name in overrides:
         if sensors is not None and name in {spec.name for spec in scene.sensors} and name not in sensors:
             raise UserError(f"--endpoint {name}=...: sensor {name!r} is not among --sensors {args.sensors}")

@@ -27,21 +27,29 @@ MALFORMED: dict[str, list[tuple[list[str], str]]] = {
         (["railway", "--bogus"], "--bogus"),
         (["railway", "--endpoint", "urg=tcp:nowhere"], "tcp:nowhere"),
         (["railway", "--control", "nonsense"], "--control"),
+        (["railway", "--epoch", "nan"], "--epoch"),  # NaN stopped every clock read: a traceback, no scans
+        (["railway", "--epoch=-1e300"], "--epoch"),  # simulated time far past what a scan may take
+        (["railway", "--epoch=--"], "--epoch"),  # argparse makes that [] for any type
+        (["railway", "--control-token", ""], "--control-token"),
     ],
     "scan": [
         (["railway", "--sensor", "urg", "--time", "soon"], "--time"),
         (["railway"], "--sensor"),
         (["railway", "--sensor", "urg", "--seed", "x"], "--seed"),
+        (["railway", "--sensor", "urg", "--time=--"], "--time"),
     ],
     "plot": [
         (["bocas", "--sensor", "urg", "--end", "1", "--out", "x.xyz"], ".xyz"),
         (["bocas", "--sensor", "urg", "--end", "1", "--out", "x.png", "--width", "wide"], "--width"),
         (["bocas", "--map", "--time", "later", "--out", "x.png"], "--time"),
+        (["bocas", "--map", "--out", ""], "--out"),
     ],
     "record": [
         (["railway", "--sensor", "urg", "--end", "1", "--out", "x.log", "--format", "tape"], "--format"),
         (["railway", "--sensor", "urg", "--end", "1", "--out", "x.log", "--seed", "x"], "--seed"),
         (["railway", "--sensor", "urg", "--end", "1", "--out", "x.log", "--model", "lms200"], "lms200"),
+        (["railway", "--sensor", "urg", "--end", "1", "--out", ""], "--out"),
+        (["railway", "--sensor", "urg", "--end", "1", "--out", "/"], "existing directory"),
     ],
     "replay": [
         (["missing.log", "--device", "urg-04lx"], "missing.log"),
@@ -62,6 +70,7 @@ MALFORMED: dict[str, list[tuple[list[str], str]]] = {
         (["plume", "fire", "rate"], "expected 1 number"),
         (["pose", "robot", "one", "two"], "invalid float value"),
         (["frobnicate"], "frobnicate"),
+        (["watch", "urg", "--count", "0"], "--count"),
     ],
 }
 
@@ -137,3 +146,15 @@ def test_record_names_the_ground_truth_after_its_output_file(tmp_path: Path) -> 
     for name, poses in (("run.log.tum", 4), ("run.mcap.tum", 6)):
         lines = (tmp_path / name).read_text().splitlines()
         assert len([line for line in lines if not line.startswith("#")]) == poses
+
+
+def test_record_does_not_write_through_a_symbolic_link(tmp_path: Path) -> None:
+    """A link at --out (or at its ground truth's path) is refused, and what it points to is left alone."""
+    target = tmp_path / "elsewhere.txt"
+    target.write_text("keep me")
+    for linked in ("run.log", "run.log.tum"):
+        (tmp_path / linked).symlink_to(target)
+        result = run_cli("record", "railway", "--sensor", "urg", "--end", "0.2", "--out", "run.log", cwd=tmp_path)
+        assert result.returncode == 2 and "symbolic link" in result.stderr and "Traceback" not in result.stderr, result.stderr
+        assert target.read_text() == "keep me"
+        (tmp_path / linked).unlink()
