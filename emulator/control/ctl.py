@@ -2,8 +2,11 @@
 
 Each subcommand is one request; the answer is printed as JSON (`state`) or
 as one line saying what was applied. `watch SENSOR` prints a line per scan
-from the WebSocket until interrupted. Any refusal or unreachable daemon is
-one line on stderr and exit status 2 (a `UserError`).
+from the WebSocket until interrupted; while the simulated clock is paused
+there are no scans, so it says so on stderr, once when it learns of the
+pause and once when the clock resumes (from the state messages the
+WebSocket sends on every change: nothing is polled). Any refusal or
+unreachable daemon is one line on stderr and exit status 2 (a `UserError`).
 """
 
 from __future__ import annotations
@@ -74,11 +77,12 @@ class ControlClient:
     def clock(self, **changes: Any) -> dict[str, Any]:
         return self.call("PATCH", "/api/clock", changes)
 
-    def watch(self, sensor: str, count: int | None = None, out=print) -> None:
-        """A line per scan of `sensor` from the WebSocket (`count` scans, or until interrupted)."""
-        asyncio.run(self._watch(sensor, count, out))
+    def watch(self, sensor: str, count: int | None = None, out=print, note=None) -> None:
+        """A line per scan of `sensor` from the WebSocket (`count` scans, or until interrupted) to `out`;
+        a line to `note` (default: stderr) when the clock is paused, and when it runs again."""
+        asyncio.run(self._watch(sensor, count, out, note or _to_stderr))
 
-    async def _watch(self, sensor: str, count: int | None, out) -> None:
+    async def _watch(self, sensor: str, count: int | None, out, note) -> None:
         import aiohttp
 
         headers = {"Authorization": f"Bearer {self.token}"} if self.token else {}
@@ -88,12 +92,16 @@ class ControlClient:
                 async with session.ws_connect(ws_url, max_msg_size=0) as socket:
                     await socket.send_json({"subscribe": [sensor]})
                     seen = 0
+                    paused = False  # as the last state message said (the first comes on connecting)
                     async for message in socket:
                         if message.type != aiohttp.WSMsgType.TEXT:
                             break
                         data = json.loads(message.data)
                         if data.get("type") == "error":
                             raise UserError(f"{data.get('status')}: {data.get('error')}")
+                        if data.get("type") == "state" and bool(data.get("paused")) != paused:
+                            paused = not paused
+                            note(clock_line(data, sensor))
                         if data.get("type") == "scan":
                             try:
                                 out(scan_line(data))
@@ -107,6 +115,22 @@ class ControlClient:
             raise UserError(f"{error.status}: {error.message}") from None
         except (aiohttp.ClientError, OSError) as error:
             raise UserError(f"cannot reach the control API at {self.url}: {error}") from None
+
+
+def clock_line(state: dict[str, Any], sensor: str) -> str:
+    """What `watch` says when a state message finds the clock paused (no scans come until it runs
+    again), or running again."""
+    at = f"{state.get('time_s', math.nan):.3f} s"
+    if state.get("paused"):
+        return f"clock paused at {at}: no scans of {sensor} until it resumes (ctl clock --resume)"
+    return f"clock resumed at {at}"
+
+
+def _to_stderr(line: str) -> None:
+    try:
+        print(line, file=sys.stderr, flush=True)
+    except BrokenPipeError:  # nobody reads stderr any more: the scans go on
+        pass
 
 
 def _quiet_stdout() -> None:

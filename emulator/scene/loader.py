@@ -188,8 +188,11 @@ def _describe_toml_error(error: tomllib.TOMLDecodeError, text: str) -> str:
 
 def _show(value: Any, depth: int = 0) -> str:
     """A value as the user wrote it in TOML, short enough for a one-line message
-    (nesting past a few levels is elided: a JSON body can nest deeper than the stack)."""
-    if isinstance(value, bool):
+    (nesting past a few levels is elided: a JSON body can nest deeper than the stack).
+    TOML has no null: None comes from JSON (the control API, an event log) and reads as JSON's `null`."""
+    if value is None:
+        text = "null"
+    elif isinstance(value, bool):
         text = "true" if value else "false"
     elif isinstance(value, str):
         text = json.dumps(value[:64])

@@ -16,16 +16,28 @@ marked). The panel (present when the daemon's control API is on) has a
 density slider per region, an emitting toggle per plume, the clock's speed
 and pause, and a gizmo per live body; each acts through the control API
 (`control_client.py`), the same way in as any other client.
+
+viser serves the page and its web socket on one port through `websockets`,
+whose HTTP parser takes GET alone: any other method had the connection
+closed without a word (and a traceback on the daemon's stderr). The view's
+process answers it `405 Method Not Allowed` with `Allow: GET` instead
+(`answer_other_methods`).
 """
 
 from __future__ import annotations
 
+import http
+import re
 import socket
+from collections.abc import Generator
 from typing import Any, Callable, Mapping
 
 import numpy as np
 import rich
 import viser
+import websockets.asyncio.server
+from websockets.protocol import CONNECTING
+from websockets.server import ServerProtocol
 
 from emulator.recording.laserscan import values_to_ranges
 from emulator.recording.scene_look import (
@@ -100,6 +112,51 @@ def _port_free(host: str, port: int) -> bool:
     return True
 
 
+_METHOD = re.compile(rb"[!#$%&'*+.^_`|~0-9A-Za-z-]+")  # an HTTP method: a token (RFC 9110)
+_METHOD_SEEN_WITHIN = 64  # bytes of the request line within which its method's end (a space) is looked for
+
+
+class _ViewServerProtocol(ServerProtocol):
+    """viser's WebSocket server protocol, but a request whose method is not GET is answered 405 with
+    `Allow: GET` (websockets' parser refused it with no response at all). Everything else is
+    websockets' own: the method is read from the bytes received, which are left for its parser."""
+
+    def parse(self) -> Generator[None]:
+        if self.state is CONNECTING:
+            method = yield from self._method()
+            if method is not None and method != b"GET":
+                shown = method.decode("ascii")
+                response = self.reject(http.HTTPStatus.METHOD_NOT_ALLOWED,
+                                       f"{shown} is not allowed: the browser view serves its page to GET only\n")
+                response.headers["Allow"] = "GET"
+                if method == b"HEAD":
+                    response.body = b""  # a HEAD answer has no body (Content-Length says what it would be)
+                self.send_response(response)  # then end of stream, and the rest is discarded
+                yield
+                return
+        yield from super().parse()
+
+    def _method(self) -> Generator[None, None, bytes | None]:
+        """The request line's method once received, without consuming it; None if it is not one."""
+        reader = self.reader
+        while True:
+            end = reader.buffer.find(b" ", 0, _METHOD_SEEN_WITHIN)
+            if end >= 0:
+                method = bytes(reader.buffer[:end])
+                return method if _METHOD.fullmatch(method) else None
+            if len(reader.buffer) >= _METHOD_SEEN_WITHIN or b"\n" in reader.buffer or reader.eof:
+                return None  # websockets' parser refuses it as before
+            yield
+
+
+def answer_other_methods() -> None:
+    """Make the `websockets` servers of this process (the view's own: viser's) answer a method other
+    than GET with 405 and `Allow: GET`. viser gives no way to pass a protocol of our own, so the name
+    its server looks up is replaced; nothing else in the view's process serves through websockets."""
+    if websockets.asyncio.server.ServerProtocol is ServerProtocol:
+        websockets.asyncio.server.ServerProtocol = _ViewServerProtocol  # type: ignore[misc]
+
+
 class BrowserView:
     """The viser server, the scene drawn into it, and its panel; `update` redraws the world.
 
@@ -111,6 +168,7 @@ class BrowserView:
             raise PortTaken(f"{host}:{port} is in use")
         self.scene = scene
         rich.reconfigure(quiet=True)  # viser's banners must not mix with `ready` lines on stdout
+        answer_other_methods()
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.server.request_share_url = lambda *args, **kwargs: None  # never tunnel the view off this machine
         self.server.gui.configure_theme(show_share_button=False, control_width="large")
