@@ -5,16 +5,18 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import os
 from pathlib import Path
 
 from emulator.control.events import read_events, world_events
 from emulator.errors import UserError
 from emulator.optics import World
-from emulator.scene import Scene, load_scene
+from emulator.scene import Scene, bundled_scenes, load_scene
 from emulator.scene.smoke_scale import scale_smoke
 from emulator.sensors.response import apply_model_override
 
 MAX_SMOKE_SCALE = 1000.0
+MIN_SEED = 0  # a scene file's `seed` (scene/loader.py): a whole number, at least 0, with no upper bound
 
 
 def add_scene_options(parser: argparse.ArgumentParser, *, optional_scene: bool = False, seed: bool = True) -> None:
@@ -25,7 +27,8 @@ def add_scene_options(parser: argparse.ArgumentParser, *, optional_scene: bool =
     else:
         parser.add_argument("scene", metavar="SCENE", help="bundled scene name or path to a .toml file")
     if seed:
-        parser.add_argument("--seed", type=int, default=None, metavar="N", help="override the scene's seed")
+        parser.add_argument("--seed", type=seed_number, default=None, metavar="N",
+                            help=f"override the scene's seed (a whole number >= {MIN_SEED})")
     parser.add_argument(
         "--model", metavar="PRESET", default=None,
         help="smoke/sensor response preset replacing the scene's (formsma2011 or physical)",
@@ -38,7 +41,7 @@ def add_scene_options(parser: argparse.ArgumentParser, *, optional_scene: bool =
 
 def scene_from_args(args: argparse.Namespace) -> Scene:
     """The scene named on the command line, with its `--model` and `--seed` overrides applied."""
-    scene = apply_model_override(load_scene(args.scene), args.model)
+    scene = apply_model_override(load_scene(scene_argument(args.scene)), args.model)
     if getattr(args, "seed", None) is not None:
         scene = dataclasses.replace(scene, seed=args.seed)
     if args.smoke_scale is not None:
@@ -46,6 +49,25 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
             raise UserError(f"--smoke-scale must be between 0 and {MAX_SMOKE_SCALE:g}, got {args.smoke_scale}")
         scene = scale_smoke(scene, args.smoke_scale)
     return scene
+
+
+def seed_number(text: str) -> int:
+    """An argparse type: a seed in the range a scene file's `seed` takes (a whole number >= MIN_SEED)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < MIN_SEED:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= {MIN_SEED}, got {text!r}")
+    return value
+
+
+def scene_argument(text: str) -> str:
+    """SCENE as given, unless it names a directory that is no bundled scene's name (a bundled name wins
+    over a directory of that name in the working directory): a UserError saying so, not "no such scene"."""
+    if os.path.isdir(text) and text not in {bundled.name for bundled in bundled_scenes()}:
+        raise UserError(f"{text}: is a directory, not a scene file (give a scene's .toml file or a bundled scene's name)")
+    return text
 
 
 MAX_SIMULATED_TIME_S = 1e7  # 115 days: far beyond any run, far inside the µs grid's exact range

@@ -107,6 +107,8 @@ def run(args: argparse.Namespace) -> int:
         return _run_mcap(args)
     if args.topic is not None:
         raise UserError(f"--topic: {args.log} is not an MCAP file or a ROS bag")
+    if args.log.is_dir():  # a ROS 2 bag's directory holds metadata.yaml (is_bag); this one does not
+        raise UserError(f"{args.log}: is a directory, not a log file (nor a ROS 2 bag: it has no metadata.yaml)")
     log = read_log(args.log)
     sensor = replay_sensor(log, args.model, log.header.sensor or DEFAULT_NAMES[args.model])
     scene = replay_scene(log, args.model, args.endpoint)

@@ -285,14 +285,16 @@ class Watching:
 
 
 def served_sensors(scene: Scene, listed: str | None) -> tuple[str, ...] | None:
-    """`--sensors a,b` → ("a", "b"), each a sensor of the scene; None serves them all."""
+    """`--sensors a,b` → ("a", "b"), each a sensor of the scene and named once; None serves them all."""
     if listed is None:
         return None
     names = tuple(name.strip() for name in listed.split(","))
     known = [spec.name for spec in scene.sensors]
-    for name in names:
+    for index, name in enumerate(names):
         if name not in known:
             raise UserError(f"--sensors: no sensor named {name!r} (known: {', '.join(known) or 'none'})")
+        if name in names[:index]:
+            raise UserError(f"--sensors {listed}: sensor {name!r} named more than once")
     return names
 
 
