@@ -101,7 +101,7 @@ def output_path(text: str) -> Path:
         raise argparse.ArgumentTypeError("expected a file name, got ''")
     path = Path(text)
     if path.is_dir() and not path.is_symlink():
-        raise argparse.ArgumentTypeError(f"{text} is an existing directory")
+        raise argparse.ArgumentTypeError(f"{text}: a directory of that name exists (never written into or over: name a new file or bag)")
     return path
 
 

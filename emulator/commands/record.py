@@ -19,6 +19,23 @@ per scan, the sensor's world pose at its time stamp.
 frames and the ground truth inside the bag (emulator/recording/rosbag.py:
 `/odom`, `/tf`, `/tf_static`); `--epoch` sets the ROS time of simulated time 0
 and `--map-frame`, `--odom-frame`, `--base-frame` the frame names.
+
+`--out` is checked before any work: its directory must exist (nothing is
+created on the way to it, and the message names `--out`, not the ground
+truth's `.tum` beside it); a suffix that names a format must be that format's
+(`.mcap`: `--format mcap`, `.bag`: `--format rosbag1`; `.db3`, a ROS 2 bag's
+SQLite storage, is never written); and a rosbag2 bag is a
+directory named without a suffix: `--out run` makes `run/metadata.yaml` and
+`run/run.mcap`, so `--out run.mcap` (which made `run.mcap/run.mcap.mcap`) or
+`--out run.db3` is refused, naming the directory to give instead.
+
+A span is counted before any work: more than `--max-scans` scans in all
+(default MAX_SCANS, 100 000: 2.8 h of a URG-04LX at 10 Hz, 22 min of an LMS200
+at 1°, 75 Hz) is refused in one line that names the count, unless
+`--max-scans` is raised. The scans are then made, written and dropped one by
+one (their times too, and a bag's /tf and /odom a minute at a time), so
+memory stays flat whatever the span, but for the index rosbags' ROS 1 writer
+keeps until it closes (about 200 bytes a message); only the files grow.
 """
 
 from __future__ import annotations
@@ -36,19 +53,38 @@ from emulator.recording.ground_truth import with_ground_truth
 from emulator.recording.rosbag import DEFAULT_EPOCH_S, FORMATS as BAG_FORMATS, FrameNames, write_bag
 from emulator.scene.model import Scene
 from emulator.recording.textlog import LogHeader, write_log
-from emulator.sensors import create_sensor
+from emulator.sensors import Sensor, create_sensor
 from emulator.sensors.published import published
-from emulator.sensors.series import scan_series, scan_times
+from emulator.sensors.series import scan_count, scan_series, span_times
+
+MAX_SCANS = 100_000  # record --max-scans's default: scans of all --sensor together
+# Suffixes that name a format: an --out with one must be written in it (rosbag2 takes a directory: none of them).
+SUFFIX_FORMATS = {".mcap": "mcap", ".bag": "rosbag1", ".db3": "rosbag2"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_scene_options(parser)
-    add_span_options(parser, verb="record", out_metavar="FILE", out_help="log file to write")
+    add_span_options(
+        parser, verb="record (rosbag2|rosbag1: NAME[,NAME...])", out_metavar="FILE|DIR",
+        out_help="where to write, in an existing directory: text: a log FILE (ground truth beside it in FILE.tum); "
+        "mcap: FILE.mcap (and FILE.mcap.tum); rosbag1: FILE.bag; rosbag2: a new bag directory DIR named without a "
+        "suffix (DIR/metadata.yaml, DIR/DIR.mcap), so an --out ending in .mcap or .bag is refused for rosbag2, as "
+        "is one of those for any other format than its own, and .db3 always (record writes no SQLite bags)",
+    )
+    _set_help(parser, "--end", "last simulated time (s); a span of more than --max-scans scans is refused")
+    parser.add_argument(
+        "--max-scans", type=max_scans, default=MAX_SCANS, metavar="N",
+        help=f"refuse a span of more than N scans of all --sensor together, before writing anything "
+        f"(default {MAX_SCANS}: 2.8 h of a URG-04LX at 10 Hz, 22 min of an LMS200 at 75 Hz; a text log of a "
+        "URG-04LX takes 9 kB a scan); scans are made, written and dropped one by one: memory stays flat whatever N "
+        "(but for the index a ROS 1 bag's writer keeps until it closes, about 200 bytes a message)",
+    )
     add_events_in_option(parser, "--events")
     parser.add_argument(
         "--format", choices=("text", "mcap", *BAG_FORMATS), default="text",
         help="text: the seed dataset's log (default); mcap: Foxglove LaserScan, device values, transforms and scene; "
-        "rosbag2 (--out DIR) / rosbag1 (--out FILE.bag): a ROS bag of every --sensor NAME[,NAME...] with tf and odometry",
+        "rosbag2 (--out DIR, no suffix) / rosbag1 (--out FILE.bag): a ROS bag of every --sensor NAME[,NAME...] "
+        "with tf and odometry",
     )
     bag = parser.add_argument_group("ROS bags (--format rosbag2|rosbag1)")
     bag.add_argument("--epoch", type=bag_epoch, default=DEFAULT_EPOCH_S, metavar="UNIX_TIME",
@@ -56,6 +92,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     bag.add_argument("--map-frame", default=FrameNames.map, metavar="NAME", help="REP 105 map frame (default map)")
     bag.add_argument("--odom-frame", default=FrameNames.odom, metavar="NAME", help="REP 105 odom frame (default odom)")
     bag.add_argument("--base-frame", default=FrameNames.base, metavar="NAME", help="the robot's frame (default base_link)")
+
+
+def _set_help(parser: argparse.ArgumentParser, option: str, text: str) -> None:
+    """Replace the help of an option a shared helper added (emulator/commands/options.py) with record's own."""
+    parser._option_string_actions[option].help = text  # noqa: SLF001 (argparse has no public setter)
+
+
+def max_scans(text: str) -> int:
+    """An argparse type: a whole number of scans, at least 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of scans, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
+    return value
 
 
 def bag_epoch(text: str) -> float:
@@ -70,57 +122,107 @@ def bag_epoch(text: str) -> float:
     return value
 
 
+def check_out(out: Path, fmt: str) -> None:
+    """Refuse, before any work, an --out in a directory that is not there, with a suffix of another
+    format, or (rosbag2: a bag directory) with a file's suffix."""
+    parent = out.parent
+    if not parent.is_dir():
+        what = "is not a directory" if parent.exists() else "does not exist"
+        raise UserError(f"--out {out}: its directory {parent} {what} (record creates no directories)")
+    suffix = out.suffix.lower()
+    if fmt == "rosbag2" and suffix in SUFFIX_FORMATS:
+        bare = out.with_suffix("")
+        raise UserError(f"--out {out}: --format rosbag2 writes a bag directory, named without a suffix "
+                        f"(--out {bare} makes {bare}/metadata.yaml and {bare}/{bare.name}.mcap)")
+    if suffix == ".db3":
+        raise UserError(f"--out {out}: .db3 is a ROS 2 bag's SQLite storage, which record does not write "
+                        f"(--format rosbag2 --out {out.with_suffix('')} writes a bag directory)")
+    if suffix in SUFFIX_FORMATS and SUFFIX_FORMATS[suffix] != fmt:
+        raise UserError(f"--out {out}: a {suffix} name is for --format {SUFFIX_FORMATS[suffix]}, not --format {fmt} "
+                        f"(pass --format {SUFFIX_FORMATS[suffix]}, or name the file otherwise)")
+
+
+def check_span(args: argparse.Namespace, sensors: list[Sensor]) -> int:
+    """The number of scans the span holds (at least one), or a UserError when it holds none or
+    more than --max-scans."""
+    names = ", ".join(sensor.name for sensor in sensors)
+    total = sum(scan_count(s.configured_period_s, args.start, args.end, s.configured_phase_s) for s in sensors)
+    if total == 0:
+        raise UserError(f"no scan of {names} completes between {args.start} and {args.end} s")
+    if total > args.max_scans:
+        per_second = sum(1.0 / sensor.configured_period_s for sensor in sensors)
+        raise UserError(
+            f"--start {args.start:.10g} to --end {args.end:.10g} holds {total} scans of {names}, more than --max-scans "
+            f"{args.max_scans} allows (that many span {args.max_scans / per_second:.6g} s here): "
+            "record a shorter span, or raise --max-scans"
+        )
+    return total
+
+
 def run(args: argparse.Namespace) -> int:
+    check_out(args.out, args.format)
     scene = scene_from_args(args)
     if args.format in BAG_FORMATS:
         return _run_bag(args, scene)
     if "," in args.sensor:
         raise UserError(f"--sensor {args.sensor}: --format {args.format} records one sensor (a ROS bag takes several)")
     sensor = create_sensor(scene, args.sensor, world_from_args(scene, args))
-    times = scan_times(sensor.configured_period_s, args.start, args.end, sensor.configured_phase_s)
-    scans = map(published, progress(scan_series(sensor, times), len(times), f"record {sensor.name}"))
-    first = next(scans, None)
-    if first is None:
-        raise UserError(f"no scan of {sensor.name} completes between {args.start} and {args.end} s")
+    total = check_span(args, [sensor])
+    times = span_times(sensor.configured_period_s, args.start, args.end, sensor.configured_phase_s)
+    scans = map(published, progress(scan_series(sensor, times), total, f"record {sensor.name}"))
+    first = next(scans)
     truth_path = ground_truth_path(args.out)
     for path in (args.out, truth_path):
         if path.is_symlink():
             raise UserError(f"{path} is a symbolic link: record writes only files, never through links")
     try:
-        with truth_path.open("w", encoding="ascii") as truth:
-            every_scan = with_ground_truth(itertools.chain([first], scans), sensor, truth)
-            if args.format == "mcap":
-                from emulator.recording.mcap import record_mcap  # foxglove-sdk: loaded only when asked for
+        if args.format == "mcap":
+            from emulator.recording.mcap import record_mcap  # foxglove-sdk: loaded only when asked for
 
-                count = record_mcap(args.out, scene, sensor.name, every_scan)
-            else:
-                with args.out.open("w", encoding="ascii") as out:
-                    count = write_log(out, every_scan, LogHeader(sensor.name, sensor.model, first.unit))
+            with truth_path.open("w", encoding="ascii") as truth:
+                count = record_mcap(args.out, scene, sensor.name, with_ground_truth(itertools.chain([first], scans), sensor, truth))
+        else:  # the user's file first: a failure names it, not the ground truth beside it
+            with args.out.open("w", encoding="ascii") as out, truth_path.open("w", encoding="ascii") as truth:
+                every_scan = with_ground_truth(itertools.chain([first], scans), sensor, truth)
+                count = write_log(out, every_scan, LogHeader(sensor.name, sensor.model, first.unit))
     except OSError as error:
         raise UserError(f"cannot write {error.filename or args.out}: {error.strerror}") from None
-    print(f"recorded {count} scans of {sensor.name} ({sensor.model}) to {args.out}, ground truth to {truth_path}")
+    print(f"recorded {_scans(count)} of {sensor.name} ({sensor.model}) to {args.out}, ground truth to {truth_path}")
     return 0
 
 
 def _run_bag(args: argparse.Namespace, scene: Scene) -> int:
     """Every named sensor's scans, in time order, into one bag with its frames and ground truth."""
+    frames = frame_names(args)
     world = world_from_args(scene, args)
     names = [name.strip() for name in args.sensor.split(",")]
     if len(set(names)) != len(names) or not all(names):
         raise UserError(f"--sensor {args.sensor}: name each sensor once")
     sensors = [create_sensor(scene, name, world) for name in names]
-    series, total = [], 0
-    for sensor in sensors:
-        times = scan_times(sensor.configured_period_s, args.start, args.end, sensor.configured_phase_s)
-        series.append(scan_series(sensor, times))
-        total += len(times)
-    if total == 0:
-        raise UserError(f"no scan of {args.sensor} completes between {args.start} and {args.end} s")
+    total = check_span(args, sensors)
+    series = [scan_series(sensor, span_times(sensor.configured_period_s, args.start, args.end, sensor.configured_phase_s))
+              for sensor in sensors]
     scans = progress(heapq.merge(*series, key=lambda scan: scan.time_s), total, f"record {args.sensor}")
-    frames = FrameNames(args.map_frame, args.odom_frame, args.base_frame)
     count = write_bag(args.out, args.format, sensors, scans, args.end, frames, args.epoch)
-    print(f"recorded {count} scans of {', '.join(names)} to the {args.format} bag {args.out}")
+    print(f"recorded {_scans(count)} of {', '.join(names)} to the {args.format} bag {args.out}")
     return 0
+
+
+def frame_names(args: argparse.Namespace) -> FrameNames:
+    """The bag's REP 105 frames: each named (tf refuses an empty frame id) and all three apart (a frame
+    that is its own parent breaks every tf lookup)."""
+    given = {"--map-frame": args.map_frame, "--odom-frame": args.odom_frame, "--base-frame": args.base_frame}
+    for option, name in given.items():
+        if not name or any(character.isspace() for character in name):
+            raise UserError(f"{option} {name!r}: expected a frame name (not empty, no spaces)")
+    if len(set(given.values())) < len(given):
+        shown = ", ".join(f"{option} {name}" for option, name in given.items())
+        raise UserError(f"{shown}: the three frames must differ (tf would make a frame its own parent)")
+    return FrameNames(args.map_frame, args.odom_frame, args.base_frame)
+
+
+def _scans(count: int) -> str:
+    return f"{count} scan" if count == 1 else f"{count} scans"
 
 
 def ground_truth_path(log: Path) -> Path:

@@ -6,27 +6,35 @@ darkest); smoke regions are shaded orange by their density at the time asked
 time are their collision boxes in purple; each moving body's whole trajectory
 is a blue line with a dot where the body is at that time; the chosen sensor's
 scan at that time is red points (green cross: the sensor), and the directions
-whose beams returned an error code are teal ticks around it. Axes in metres
-with equal scale in x and y, a legend of what is drawn beside them;
+whose beams returned an error code are teal ticks around it. With a span
+(`plot --map --start T0 --end T1`: `draw_map(..., since_s=T0)` at T1) the
+scene is drawn at its end and every scan of the sensor in it is drawn, each
+beam from where the sensor was when it measured it: at most MAX_MAP_BEAMS
+beams (1 000 000: 1300 scans of a URG-04LX), a longer span refused in one
+line once its first scan is made, before the others. Axes in
+metres with equal scale in x and y, a legend of what is drawn beside them;
 `MapView.pixel` turns a world point into the pixel it is drawn at (the tests
 read pixels back with it).
 """
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from emulator.errors import UserError
 from emulator.plots.output import save_figure
-from emulator.plots.waterfall import LMS_NO_RETURN_CODES, pyplot
+from emulator.plots.waterfall import LMS_NO_RETURN_CODES, pyplot, span_scan_times
 from emulator.scene import Pose, Scene, SceneObject, Shape
 from emulator.scene.bodies import Body, BodyPoses, Frames, Keyframes
 from emulator.scene.geometry import world_mesh
 from emulator.scene.plumes import particles_at
-from emulator.sensors import beam_times_s, create_sensor, hokuyo_model, ranges_m
+from emulator.sensors import Scan, beam_times_s, create_sensor, hokuyo_model, ranges_m
 from emulator.sensors.mount import SensorMount
+from emulator.sensors.series import scan_series, scan_times
 
 BACKGROUND_RGB = (1.0, 1.0, 1.0)
 SMOKE_RGB = (1.0, 0.55, 0.1)
@@ -41,6 +49,8 @@ MAX_SMOKE_ALPHA = 0.75
 PLUME_ALPHA = 0.6
 MARGIN_M = 1.0
 TRAJECTORY_SAMPLES = 2000
+# Beams a map draws at most (plot --map --start/--end: each a point or a tick): 1300 scans of a URG-04LX, 925 of a UTM-30LX.
+MAX_MAP_BEAMS = 1_000_000
 ERROR_TICKS = (0.025, 0.06)  # where an error code's tick runs from the sensor, in parts of the map's width
 # The image's frame around the map, in pixels: tick labels left and below, the title above, the legend right.
 FRAME_LEFT_PX, FRAME_BOTTOM_PX, FRAME_TOP_PX, FRAME_GAP_PX = 62, 44, 30, 12
@@ -153,20 +163,21 @@ def _outline(footprint: _Footprint) -> np.ndarray:
 
 @dataclass(frozen=True)
 class ScanOnMap:
-    """A scan in the world: its points, the beams that returned an error code (where each left
-    from and its direction), and the sensor's pose (x, y, yaw) at the time stamp."""
+    """A scan (or every scan of a span) in the world: its points, the beams that returned an error
+    code (where each left from and its direction), and the sensor's pose (x, y, yaw) at the time
+    stamp (a span's: at its end)."""
 
     points: np.ndarray  # (n, 2)
     error_origins: np.ndarray  # (k, 2)
     error_angles: np.ndarray  # (k,) rad, world frame
     pose: np.ndarray  # (3,)
+    scans: int = 1
 
 
-def scan_points(scene: Scene, sensor: str, time_s: float) -> ScanOnMap:
-    """The sensor's scan at `time_s` in the world, each beam from the sensor's pose at the instant
-    it was measured. Codes meaning "nothing in range" and a Hokuyo's steps outside its
-    measurable area are neither points nor errors."""
-    scan = create_sensor(scene, sensor).configured_scan(time_s)
+def _placed(scene: Scene, sensor: str, scan: Scan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(points, error origins, error angles) of one scan in the world, each beam from the sensor's
+    pose at the instant it was measured. Codes meaning "nothing in range" and a Hokuyo's steps
+    outside its measurable area are neither points nor errors."""
     ranges = ranges_m(scan)
     beam_poses = sensor_poses_2d(scene, sensor, beam_times_s(scan))
     angles = np.asarray(scan.angles_rad, dtype=float) + beam_poses[:, 2]
@@ -177,7 +188,35 @@ def scan_points(scene: Scene, sensor: str, time_s: float) -> ScanOnMap:
     measurable[hokuyo.valid_steps if hokuyo is not None else slice(None)] = True
     no_return = np.isin(np.asarray(scan.values), hokuyo.no_return_codes if hokuyo is not None else LMS_NO_RETURN_CODES)
     errors = ~seen & measurable & ~no_return
-    return ScanOnMap(points, beam_poses[errors, :2], angles[errors], sensor_poses_2d(scene, sensor, np.array([time_s]))[0])
+    return points, beam_poses[errors, :2], angles[errors]
+
+
+def scan_points(scene: Scene, sensor: str, time_s: float) -> ScanOnMap:
+    """The sensor's scan at `time_s` in the world (`_placed`)."""
+    points, origins, angles = _placed(scene, sensor, create_sensor(scene, sensor).configured_scan(time_s))
+    return ScanOnMap(points, origins, angles, sensor_poses_2d(scene, sensor, np.array([time_s]))[0])
+
+
+def span_points(scene: Scene, sensor: str, start_s: float, end_s: float, max_beams: int = MAX_MAP_BEAMS) -> ScanOnMap:
+    """Every scan of the sensor completed in [start_s, end_s] (on its scan period and phase, as
+    `record` takes them) in the world, with the sensor's pose at `end_s`; none, or more than
+    `max_beams` beams, is a UserError once the first scan is made, before the others."""
+    device = create_sensor(scene, sensor)
+    period_s, phase_s = device.configured_period_s, device.configured_phase_s
+    head = scan_times(period_s, start_s, min(end_s, start_s + period_s), phase_s)  # one scan, if the span holds one
+    if not len(head):
+        raise UserError(f"no scan of {sensor} completes between --start {start_s:.10g} and --end {end_s:.10g} s")
+    first = device.configured_scan(float(head[0]))
+    times = span_scan_times(period_s, start_s, end_s, len(first.values), max_beams, sensor, "a map draws", phase_s)
+    scans = itertools.chain([first], scan_series(device, times[1:]))
+    placed = [_placed(scene, sensor, scan) for scan in scans]
+    return ScanOnMap(np.vstack([p[0] for p in placed]), np.vstack([p[1] for p in placed]),
+                     np.concatenate([p[2] for p in placed]), sensor_poses_2d(scene, sensor, np.array([end_s]))[0],
+                     scans=len(times))
+
+
+def _beams(count: int) -> str:
+    return f"{count} beam" if count == 1 else f"{count} beams"
 
 
 def _extent(parts: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -197,7 +236,7 @@ def _view(low: np.ndarray, high: np.ndarray, width_px: int, height_px: int) -> M
 
 
 def draw_map(
-    scene: Scene, time_s: float, out: Path, *, sensor: str | None = None,
+    scene: Scene, time_s: float, out: Path, *, sensor: str | None = None, since_s: float | None = None,
     width_px: int = 1200, height_px: int = 900, extra_points: np.ndarray | None = None,
     extra_paths: tuple[tuple[np.ndarray, tuple[float, float, float], str], ...] = (),
     title: str | None = None,
@@ -205,8 +244,10 @@ def draw_map(
     """Draw the scene from above at `time_s` into `out` (PNG, or the format its suffix names);
     the view, for reading pixels back.
 
-    `extra_points` (n, 2) are drawn like scan points (a SLAM map); `extra_paths`
-    are (points (n, 2), rgb, label) lines (an estimated path)."""
+    With `since_s`, the sensor's scans are every one from `since_s` to `time_s`
+    (`span_points`), not the one at `time_s`. `extra_points` (n, 2) are drawn like
+    scan points (a SLAM map); `extra_paths` are (points (n, 2), rgb, label) lines
+    (an estimated path)."""
     plt = pyplot()
     from matplotlib.collections import LineCollection, PolyCollection
 
@@ -216,7 +257,10 @@ def draw_map(
     bodies = [body for body in scene.bodies if len(trajectory_times(body))]
     paths = [body_frames(scene, body.name, trajectory_times(body)).positions[:, :2] for body in bodies]
     here = [body_frames(scene, body.name, np.array([time_s])).positions[0, :2] for body in bodies]
-    scan = scan_points(scene, sensor, time_s) if sensor is not None else None
+    if sensor is None:
+        scan = None
+    else:
+        scan = scan_points(scene, sensor, time_s) if since_s is None else span_points(scene, sensor, since_s, time_s)
 
     extent_parts = [f.triangles for f in solids if f.top_m > FLOOR_TOP_M] + [f.triangles for f, _ in regions]
     extent_parts += [p.centers[:, :2] for p in particles] + paths + [np.asarray(plume.source)[:2] for plume in scene.plumes]
@@ -277,11 +321,15 @@ def draw_map(
         ticks = np.stack([scan.error_origins + ERROR_TICKS[0] * width_m * directions,
                           scan.error_origins + ERROR_TICKS[1] * width_m * directions], axis=1)
         axes.add_collection(LineCollection(ticks, colors=[ERROR_CODE_RGB], linewidths=1.0, zorder=7))
-        legend.line(SCAN_RGB, f"scan points of {sensor}", marker=".", linestyle="none")
+        scans = "" if since_s is None else f" ({scan.scans} scan{'' if scan.scans == 1 else 's'})"
+        legend.line(SCAN_RGB, f"scan points of {sensor}{scans}", marker=".", linestyle="none")
         legend.line(SENSOR_RGB, sensor, marker="+", linestyle="none", markeredgewidth=2)
-        legend.line(ERROR_CODE_RGB, f"error codes ({len(scan.error_angles)} beams)")
-    axes.set_title(title if title is not None else f"{scene.name}: t = {time_s:g} s" + (f", scan of {sensor}" if sensor else ""),
-                   fontsize=10, loc="left")
+        legend.line(ERROR_CODE_RGB, f"error codes ({_beams(len(scan.error_angles))})")
+    if title is None:
+        title = f"{scene.name}: t = {time_s:g} s" + (f", scan of {sensor}" if sensor else "")
+        if since_s is not None and sensor:
+            title = f"{scene.name}: t = {time_s:g} s, scans of {sensor} from {since_s:g} s"
+    axes.set_title(title, fontsize=10, loc="left")
     if legend.handles:
         figure.legend(handles=legend.handles, loc="upper left", fontsize="small", frameon=False,
                       bbox_to_anchor=((view.left_px + view.width_px + FRAME_GAP_PX / 2) / width_px, 1 - view.top_px / height_px))

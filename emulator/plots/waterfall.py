@@ -1,7 +1,10 @@
 """Scans over time and the smoke along the beams, and the waterfall figure (paper Fig. 3, 5, 10).
 
 `sensor_series` computes what a plot shows: every scan of a sensor between two
-times, plus the smoke its beams crossed at each scan. `draw_waterfall` draws a
+times, plus the smoke its beams crossed at each scan. `plot` caps a span at
+MAX_PLOT_BEAMS beams (6 000 000: 880 s of a URG-04LX, 139 s of a UTM-30LX): a
+longer span is refused in one line once its first scan is made, before the
+others, so a huge `--end` never takes memory without bound. `draw_waterfall` draws a
 waterfall (time down, angle across as seen from behind the sensor, darker =
 shorter, red = error code) with the smoke level over time beside it.
 
@@ -15,6 +18,7 @@ matplotlib is an optional extra: `pip install '.[plot]'`.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -35,6 +39,10 @@ SATURATION_CLEAR = 0.8
 SATURATION_PER_DENSITY = math.log(0.8 / 0.14) / 0.0028  # ≈ 622 per density unit
 SATURATION_NOTE = "camera saturation s = 0.8·exp(−622·density): an assumption fitted to 0.0028 ↔ 0.14"
 
+# The beams a waterfall draws at most (plot --start/--end): 8797 scans of a URG-04LX (880 s), 5550 of a UTM-30LX
+# (139 s), 16620 of an LMS200 at 0.5° (443 s). About 55 bytes a beam (the series, and the image as float RGBA:
+# matplotlib's own copies of a uint8 or RGB image took twice that): plot's whole process peaked at 480 MB at the cap.
+MAX_PLOT_BEAMS = 6_000_000
 LMS_CAST_RANGE_M = 80.0
 # Codes that mean "nothing within range", shaded as the far end, not as errors.
 LMS_NO_RETURN_CODES = (8183, 8191)
@@ -95,39 +103,67 @@ class SensorSeries:
         return 8.183 if self.unit == "mm" else 81.83
 
 
+def span_scan_times(
+    period_s: float, start_s: float, end_s: float, beams: int, max_beams: int, sensor_name: str, what: str,
+    phase_s: float = 0.0,
+) -> np.ndarray:
+    """`scan_times(period_s, start_s, end_s, phase_s)` of a span of at most `max_beams` beams (scans of
+    `beams` each), or a UserError naming --end and the latest that fits (`what` draws them). Only a
+    window of one scan more than the cap is ever made: a huge --end costs nothing."""
+    max_scans = max(1, max_beams // beams)
+    window_end_s = min(end_s, start_s + (max_scans + 1) * period_s)  # holds max_scans + 1 scans or more, if it is shorter
+    times = scan_times(period_s, start_s, window_end_s, phase_s)
+    if len(times) > max_scans:
+        about = math.floor((end_s - start_s) / period_s) + 1
+        raise UserError(f"--start {start_s:.10g} to --end {end_s:.10g} holds about {about} scans of {sensor_name}: {what} "
+                        f"at most {max_beams} beams, {max_scans} of its {beams}-beam scans (--end {times[max_scans - 1]:.10g} "
+                        "at the latest from this --start); plot a shorter span")
+    return times if window_end_s >= end_s else scan_times(period_s, start_s, end_s, phase_s)
+
+
 def sensor_series(
     scene: Scene, sensor_name: str, start_s: float, end_s: float,
-    progress: Callable[[Iterator[Scan], int], Iterator[Scan]] | None = None,
+    progress: Callable[[Iterator[Scan], int], Iterator[Scan]] | None = None, max_beams: int | None = None,
 ) -> SensorSeries:
     """Every scan of the sensor in [start_s, end_s] and the smoke along its beams at each;
-    `progress(scans, count)` may wrap the scans as they are computed (a progress bar)."""
+    `progress(scans, count)` may wrap the scans as they are computed (a progress bar). With
+    `max_beams` (`plot`: MAX_PLOT_BEAMS), a span of more beams is a UserError once its first scan
+    is made; each scan is kept only as its row of the arrays (27 bytes a beam)."""
     world = World(scene)
     sensor = create_sensor(scene, sensor_name, world=world)
     spec = scene.sensor(sensor_name)
-    times = scan_times(sensor.configured_period_s, start_s, end_s)
-    if len(times) < 2:
+    period_s = sensor.configured_period_s
+    head = scan_times(period_s, start_s, min(end_s, start_s + 2 * period_s))  # two scans, if the span holds two
+    if len(head) < 2:
         raise UserError(f"--start {start_s} to --end {end_s} holds fewer than two scans of {sensor_name}")
-    computed = scan_series(sensor, times)
-    scans = list(progress(computed, len(times)) if progress is not None else computed)
     hokuyo = hokuyo_model(spec.model)
     columns = hokuyo.valid_steps if hokuyo is not None else slice(None)  # a Hokuyo's measurable area
-    angles = np.asarray(scans[0].angles_rad)[columns]
-    values = np.vstack([np.asarray(scan.values)[columns] for scan in scans]).astype(np.int64)
-    ranges = np.vstack([ranges_m(scan)[columns] for scan in scans])
-    is_code = np.isnan(ranges)
-    no_return = np.isin(values, hokuyo.no_return_codes if hokuyo is not None else LMS_NO_RETURN_CODES) & is_code
+    first = sensor.configured_scan(float(head[0]))  # how many beams a row has
+    angles = np.asarray(first.angles_rad)[columns]
+    if max_beams is None:
+        times = scan_times(period_s, start_s, end_s)
+    else:
+        times = span_scan_times(period_s, start_s, end_s, len(angles), max_beams, sensor_name, "a waterfall draws")
+    computed = itertools.chain([first], scan_series(sensor, times[1:]))
+    scans = progress(computed, len(times)) if progress is not None else computed
     cast_range_m = hokuyo.max_range_m if hokuyo is not None else LMS_CAST_RANGE_M
     fixed_rays = None if sensor.mount.moving else scan_plane_rays(sensor.mount.fixed_spec.pose, angles)
     mean_density = np.zeros(len(times))
-    plume_range = np.full(values.shape, np.inf)
-    for i, time_s in enumerate(times):
+    values = np.empty((len(times), len(angles)), dtype=np.int64)
+    ranges = np.empty((len(times), len(angles)))
+    plume_range = np.empty((len(times), len(angles)))
+    for i, (time_s, scan) in enumerate(zip(times, scans)):
+        values[i] = np.asarray(scan.values)[columns]
+        ranges[i] = ranges_m(scan)[columns]
         # a sensor on a moving body: the smoke along its beams from where it is at the scan's time stamp
         rays = fixed_rays or scan_plane_rays(sensor.mount.frames(np.array([time_s])).at(0), angles)
         hits = world.cast(*rays, cast_range_m, float(time_s))
         mean_density[i] = float(np.mean(hits.region_optical_path / hits.beam_end_m))
         plume_range[i] = hits.plume_hit_range_m
+    is_code = np.isnan(ranges)
+    no_return = np.isin(values, hokuyo.no_return_codes if hokuyo is not None else LMS_NO_RETURN_CODES) & is_code
     return SensorSeries(
-        sensor=spec.name, model=spec.model, unit=scans[0].unit, times_s=times, angles_rad=angles,
+        sensor=spec.name, model=spec.model, unit=first.unit, times_s=times, angles_rad=angles,
         values=values, ranges_m=ranges, no_return=no_return, errors=is_code & ~no_return,
         mean_density=mean_density, plume_range_m=plume_range,
         has_regions=bool(scene.regions), has_plumes=bool(scene.plumes),
@@ -150,13 +186,33 @@ def pyplot() -> Any:
 NEAREST_GREY, FARTHEST_GREY = 0.08, 0.95
 
 
-def waterfall_rgb(series: SensorSeries) -> np.ndarray:
-    """(n, m, 3) image: grey by range (darker = shorter), red for errors, pale for no return."""
-    fraction = np.clip(np.nan_to_num(series.ranges_m, nan=0.0) / series.max_range_m, 0.0, 1.0)
+def _rgb(ranges_m: np.ndarray, no_return: np.ndarray, errors: np.ndarray, max_range_m: float) -> np.ndarray:
+    fraction = np.clip(np.nan_to_num(ranges_m, nan=0.0) / max_range_m, 0.0, 1.0)
     shade = NEAREST_GREY + (FARTHEST_GREY - NEAREST_GREY) * fraction
     image = np.repeat(shade[:, :, None], 3, axis=2)
-    image[series.no_return] = NO_RETURN_RGB
-    image[series.errors] = ERROR_RGB
+    image[no_return] = NO_RETURN_RGB
+    image[errors] = ERROR_RGB
+    return image
+
+
+def waterfall_rgb(series: SensorSeries) -> np.ndarray:
+    """(n, m, 3) image: grey by range (darker = shorter), red for errors, pale for no return."""
+    return _rgb(series.ranges_m, series.no_return, series.errors, series.max_range_m)
+
+
+IMAGE_BLOCK_ROWS = 1024
+
+
+def waterfall_rgba(series: SensorSeries) -> np.ndarray:
+    """`waterfall_rgb` as matplotlib draws it, made IMAGE_BLOCK_ROWS scans at a time: each colour
+    truncated to bytes (x · 255) and back to float32, opaque. 16 bytes a beam, and matplotlib draws
+    it without a copy (from float64 RGB or uint8 it made float64 RGBA and more); the same pixels."""
+    image = np.empty((*series.ranges_m.shape, 4), dtype=np.float32)
+    image[:, :, 3] = 1.0
+    for low in range(0, len(image), IMAGE_BLOCK_ROWS):
+        rows = slice(low, low + IMAGE_BLOCK_ROWS)
+        rgb = _rgb(series.ranges_m[rows], series.no_return[rows], series.errors[rows], series.max_range_m)
+        image[rows, :, :3] = np.divide((rgb * 255).astype(np.uint8), 0xFF, dtype=np.float32)
     return image
 
 
@@ -184,7 +240,7 @@ def draw_waterfall(series: SensorSeries, out: Path, *, width_px: int = 1200, hei
     axes = figure.add_subplot(grid[0, 0])
     degrees = np.degrees(series.angles_rad)
     axes.imshow(
-        waterfall_rgb(series), aspect="auto", interpolation="nearest",
+        waterfall_rgba(series), aspect="auto", interpolation="nearest",
         extent=(degrees[0], degrees[-1], series.times_s[-1], series.times_s[0]),
     )
     axes.set_xlim(degrees.max(), degrees.min())  # left of the plot = the sensor's left

@@ -45,6 +45,7 @@ from emulator.sensors.scan import Scan
 
 FORMATS = ("rosbag2", "rosbag1")
 TF_RATE_HZ = 50.0
+TF_CHUNK = 3000  # /tf and /odom instants computed at once (a minute at TF_RATE_HZ): a bag's memory does not grow with its span
 DEFAULT_EPOCH_S = 1_000_000_000  # 2001-09-09: plainly simulated, and far from ROS time 0 ("no stamp")
 ROS2_BAG_VERSION = 8
 ROS1_TFMESSAGE = "geometry_msgs/TransformStamped[] transforms\n"  # tf2_msgs/TFMessage.msg
@@ -171,13 +172,15 @@ class BagContent:
                 transforms.append(self.messages.transform(stamp, names.base, name, np.asarray(pose.position, float), pose.rotation_matrix()))
         return self.messages.tf(transforms)
 
-    def motion(self, times_s: np.ndarray) -> Iterator[tuple[int, str, Any]]:
-        """(log time, topic, message) of /tf (odom → base, and map → lasers on other bodies) and /odom."""
+    def motion(self, times_s: np.ndarray, first: int = 0, stop: int | None = None) -> Iterator[tuple[int, str, Any]]:
+        """(log time, topic, message) of /tf (odom → base, and map → lasers on other bodies) and /odom
+        at `times_s[first:stop]` (the instants around them give the velocities' central differences)."""
         frames = self.base_frames(times_s)
         linear, angular = _body_velocities(frames, times_s)
         others = {name: sensor.mount.frames(times_s) for name, sensor in self.sensors.items() if sensor.spec.body != self.base_body}
         names = self.frames
-        for index, time_s in enumerate(times_s):
+        for index in range(first, len(times_s) if stop is None else stop):
+            time_s = times_s[index]
             stamp = _nanoseconds(self.epoch_s, float(time_s))
             position, rotation = frames.positions[index], frames.rotations[index]
             transforms = [self.messages.transform(stamp, names.odom, names.base, position, rotation)]
@@ -185,6 +188,15 @@ class BagContent:
                            for name, other in others.items()]
             yield stamp, "/tf", self.messages.tf(transforms)
             yield stamp, "/odom", self._odometry(stamp, position, rotation, linear[index], angular[index])
+
+    def motion_between(self, scans_start_s: float, end_s: float) -> Iterator[tuple[int, str, Any]]:
+        """`motion(tf_times(scans_start_s, end_s))`, TF_CHUNK instants at a time: memory stays flat however long the span."""
+        count = tf_count(scans_start_s, end_s)
+        for low in range(0, count, TF_CHUNK):
+            high = min(low + TF_CHUNK, count)
+            around_low, around_high = max(low - 1, 0), min(high + 1, count)  # the neighbours of the chunk's ends
+            times_s = tf_times(scans_start_s, end_s, around_low, around_high)
+            yield from self.motion(times_s, low - around_low, high - around_low)
 
     def _odometry(self, stamp: int, position: np.ndarray, rotation: np.ndarray, linear: np.ndarray, angular: np.ndarray) -> Any:
         new = self.messages.new
@@ -235,11 +247,31 @@ def _body_velocities(frames: Frames, times_s: np.ndarray) -> tuple[np.ndarray, n
     return linear, angular
 
 
-def tf_times(scans_start_s: float, end_s: float) -> np.ndarray:
-    """The /tf and /odom instants: every 1/TF_RATE_HZ from just before the first beam to the end."""
+def _tf_grid(scans_start_s: float, end_s: float) -> tuple[float, float, int]:
+    """(first instant, step, count) of the /tf and /odom instants."""
     step = 1.0 / TF_RATE_HZ
     first = math.floor(scans_start_s / step) * step
-    return np.round(np.arange(first, end_s + step / 2, step), 9)
+    return first, step, max(0, math.ceil((end_s + step / 2 - first) / step))
+
+
+def tf_count(scans_start_s: float, end_s: float) -> int:
+    """How many /tf and /odom instants `tf_times` holds."""
+    return _tf_grid(scans_start_s, end_s)[2]
+
+
+def tf_times(scans_start_s: float, end_s: float, low: int = 0, high: int | None = None) -> np.ndarray:
+    """The /tf and /odom instants: every 1/TF_RATE_HZ from just before the first beam to the end
+    (`[low:high]` of them: made alone, each exactly as in the whole `np.arange(first, end + step / 2, step)`,
+    whose n-th element, n ≥ 2, numpy makes as first + n · ((first + step) − first))."""
+    first, step, count = _tf_grid(scans_start_s, end_s)
+    high = count if high is None else min(high, count)
+    low = min(max(low, 0), high)
+    times = np.arange(low, high, dtype=np.float64) * ((first + step) - first) + first
+    if low <= 1 < high:
+        times[1 - low] = first + step
+    if low == 0 and high > 0:
+        times[0] = first
+    return np.round(times, 9)
 
 
 def bag_typestore(fmt: str) -> Any:
@@ -293,7 +325,7 @@ def write_bag(
             if pending is None:
                 start = float(beam_times_s(published(scan))[0])
                 write(_nanoseconds(epoch_s, start), "/tf_static", content.static_transforms(start))
-                pending = content.motion(tf_times(start, end_s))
+                pending = content.motion_between(start, end_s)
                 next_motion = next(pending, None)
             scan_time = _nanoseconds(epoch_s, scan.time_s)
             while next_motion is not None and next_motion[0] <= scan_time:

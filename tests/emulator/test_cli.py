@@ -49,7 +49,7 @@ MALFORMED: dict[str, list[tuple[list[str], str]]] = {
         (["railway", "--sensor", "urg", "--end", "1", "--out", "x.log", "--seed", "x"], "--seed"),
         (["railway", "--sensor", "urg", "--end", "1", "--out", "x.log", "--model", "lms200"], "lms200"),
         (["railway", "--sensor", "urg", "--end", "1", "--out", ""], "--out"),
-        (["railway", "--sensor", "urg", "--end", "1", "--out", "/"], "existing directory"),
+        (["railway", "--sensor", "urg", "--end", "1", "--out", "/"], "a directory of that name exists"),
     ],
     "replay": [
         (["missing.log", "--device", "urg-04lx"], "missing.log"),
