@@ -15,6 +15,7 @@ import argparse
 import json
 import time
 
+from emulator.commands.numbers import whole_number
 from emulator.control.ctl import DEFAULT_URL, ControlClient
 from emulator.errors import UserError
 
@@ -54,7 +55,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     running.add_argument("--resume", action="store_true", help="let simulated time run again")
     watch = action("watch", "watch SENSOR: a line per scan, until interrupted or --count scans")
     watch.add_argument("sensor", metavar="SENSOR", help="a sensor's name in the scene")
-    watch.add_argument("--count", type=positive_count, default=None, metavar="N", help="stop after N scans")
+    watch.add_argument("--count", type=whole_number(1), default=None, metavar="N", help="stop after N scans")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -118,14 +119,3 @@ def _twist(client: ControlClient, args: argparse.Namespace) -> int:
             answer = client.twist(args.name, vx, vy, wz)
         print(f"last {json.dumps(answer['applied'])}, at {json.dumps(answer['state']['bodies'][args.name])}")
     return 0
-
-
-def positive_count(text: str) -> int:
-    """An argparse type: a whole number of at least 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
-    return value

@@ -9,6 +9,7 @@ import os
 from pathlib import Path
 
 from emulator.control.events import read_events, world_events
+from emulator.commands.numbers import whole_number
 from emulator.errors import UserError
 from emulator.optics import World
 from emulator.scene import Scene, bundled_scenes, load_scene
@@ -27,7 +28,7 @@ def add_scene_options(parser: argparse.ArgumentParser, *, optional_scene: bool =
     else:
         parser.add_argument("scene", metavar="SCENE", help="bundled scene name or path to a .toml file")
     if seed:
-        parser.add_argument("--seed", type=seed_number, default=None, metavar="N",
+        parser.add_argument("--seed", type=whole_number(MIN_SEED), default=None, metavar="N",
                             help=f"override the scene's seed (a whole number >= {MIN_SEED})")
     parser.add_argument(
         "--model", metavar="PRESET", default=None,
@@ -49,17 +50,6 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
             raise UserError(f"--smoke-scale must be between 0 and {MAX_SMOKE_SCALE:g}, got {args.smoke_scale}")
         scene = scale_smoke(scene, args.smoke_scale)
     return scene
-
-
-def seed_number(text: str) -> int:
-    """An argparse type: a seed in the range a scene file's `seed` takes (a whole number >= MIN_SEED)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < MIN_SEED:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= {MIN_SEED}, got {text!r}")
-    return value
 
 
 def scene_argument(text: str) -> str:

@@ -47,6 +47,7 @@ import math
 from pathlib import Path
 
 from emulator.commands.options import MAX_SIMULATED_TIME_S, add_events_in_option, add_scene_options, add_span_options, scene_from_args, world_from_args
+from emulator.commands.numbers import whole_number
 from emulator.commands.progress import progress
 from emulator.errors import UserError
 from emulator.recording.ground_truth import with_ground_truth
@@ -73,7 +74,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     _set_help(parser, "--end", "last simulated time (s); a span of more than --max-scans scans is refused")
     parser.add_argument(
-        "--max-scans", type=max_scans, default=MAX_SCANS, metavar="N",
+        "--max-scans", type=whole_number(1), default=MAX_SCANS, metavar="N",
         help=f"refuse a span of more than N scans of all --sensor together, before writing anything "
         f"(default {MAX_SCANS}: 2.8 h of a URG-04LX at 10 Hz, 22 min of an LMS200 at 75 Hz; a text log of a "
         "URG-04LX takes 9 kB a scan); scans are made, written and dropped one by one: memory stays flat whatever N "
@@ -97,17 +98,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def _set_help(parser: argparse.ArgumentParser, option: str, text: str) -> None:
     """Replace the help of an option a shared helper added (emulator/commands/options.py) with record's own."""
     parser._option_string_actions[option].help = text  # noqa: SLF001 (argparse has no public setter)
-
-
-def max_scans(text: str) -> int:
-    """An argparse type: a whole number of scans, at least 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number of scans, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {text!r}")
-    return value
 
 
 def bag_epoch(text: str) -> float:
