@@ -33,7 +33,7 @@ from emulator.plots.output import save_figure
 from emulator.scene import Scene
 from emulator.sensors import Scan, create_sensor, hokuyo_model, ranges_m
 from emulator.sensors.beam_geometry import scan_plane_rays
-from emulator.sensors.series import scan_series, scan_times
+from emulator.sensors.series import scan_count, scan_series, scan_times
 
 SATURATION_CLEAR = 0.8
 SATURATION_PER_DENSITY = math.log(0.8 / 0.14) / 0.0028  # ≈ 622 per density unit
@@ -108,17 +108,16 @@ def span_scan_times(
     phase_s: float = 0.0,
 ) -> np.ndarray:
     """`scan_times(period_s, start_s, end_s, phase_s)` of a span of at most `max_beams` beams (scans of
-    `beams` each), or a UserError naming --end and the latest that fits (`what` draws them). Only a
-    window of one scan more than the cap is ever made: a huge --end costs nothing."""
+    `beams` each), or a UserError naming --end and the latest that fits (`what` draws them), counted
+    before any time is made: a huge --end costs nothing."""
     max_scans = max(1, max_beams // beams)
-    window_end_s = min(end_s, start_s + (max_scans + 1) * period_s)  # holds max_scans + 1 scans or more, if it is shorter
-    times = scan_times(period_s, start_s, window_end_s, phase_s)
-    if len(times) > max_scans:
-        about = math.floor((end_s - start_s) / period_s) + 1
-        raise UserError(f"--start {start_s:.10g} to --end {end_s:.10g} holds about {about} scans of {sensor_name}: {what} "
-                        f"at most {max_beams} beams, {max_scans} of its {beams}-beam scans (--end {times[max_scans - 1]:.10g} "
+    count = scan_count(period_s, start_s, end_s, phase_s)
+    if count > max_scans:
+        latest_s = scan_times(period_s, start_s, start_s + max_scans * period_s, phase_s)[max_scans - 1]
+        raise UserError(f"--start {start_s:.10g} to --end {end_s:.10g} holds {count} scans of {sensor_name}: {what} "
+                        f"at most {max_beams} beams, {max_scans} of its {beams}-beam scans (--end {latest_s:.10g} "
                         "at the latest from this --start); plot a shorter span")
-    return times if window_end_s >= end_s else scan_times(period_s, start_s, end_s, phase_s)
+    return scan_times(period_s, start_s, end_s, phase_s)
 
 
 def sensor_series(

@@ -194,7 +194,7 @@ def test_max_scans_sets_the_cap_and_the_help_names_it(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(("args", "words"), [
-    (["--sensor", "utm"], ["holds about 400000001 scans of utm", "a waterfall draws at most 6000000 beams",
+    (["--sensor", "utm"], ["holds 400000001 scans of utm", "a waterfall draws at most 6000000 beams",
                            "5550 of its 1081-beam scans (--end 138.725 at the latest from this --start)"]),
     (["--map", "--sensor", "utm"], ["a map draws at most 1000000 beams", "925 of its 1081-beam scans (--end 23.1 at the latest"]),
 ])
