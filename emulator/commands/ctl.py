@@ -15,14 +15,14 @@ import argparse
 import json
 import time
 
-from emulator.commands.numbers import whole_number
+from emulator.commands.values import bearer_token, whole_number
 from emulator.control.ctl import DEFAULT_URL, ControlClient
 from emulator.errors import UserError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--url", default=DEFAULT_URL, help=f"the control API (default {DEFAULT_URL})")
-    parser.add_argument("--token", default=None, help="Bearer token, if serve has --control-token")
+    parser.add_argument("--token", type=bearer_token, default=None, help="Bearer token, if serve has --control-token")
     actions = parser.add_subparsers(dest="action", metavar="ACTION", parser_class=type(parser))
     actions.required = True
     def action(name: str, help_text: str) -> argparse.ArgumentParser:

@@ -9,7 +9,7 @@ import os
 from pathlib import Path
 
 from emulator.control.events import read_events, world_events
-from emulator.commands.numbers import whole_number
+from emulator.commands.values import named_path, whole_number
 from emulator.errors import UserError
 from emulator.optics import World
 from emulator.scene import Scene, bundled_scenes, load_scene
@@ -57,6 +57,9 @@ def scene_argument(text: str) -> str:
     over a directory of that name in the working directory): a UserError saying so, not "no such scene"."""
     if os.path.isdir(text) and text not in {bundled.name for bundled in bundled_scenes()}:
         raise UserError(f"{text}: is a directory, not a scene file (give a scene's .toml file or a bundled scene's name)")
+    read_as_path = "/" in text or text.endswith(".toml")  # as scene/loader.py tells a path from a bundled name
+    if read_as_path and os.path.exists(text) and not os.path.isfile(text):  # a FIFO, a device: not "no such scene"
+        raise UserError(f"{text}: is not a regular file (give a scene's .toml file or a bundled scene's name)")
     return text
 
 
@@ -86,19 +89,23 @@ def add_span_options(
 
 
 def output_path(text: str) -> Path:
-    """An argparse type: where to write, named (not empty) and not an existing directory."""
+    """An argparse type: where to write, named (not empty), not an existing directory, and not an existing
+    FIFO, device or socket (opening a FIFO blocks until someone reads it; plot renames its image over the
+    path, which would replace /dev/null itself; record writes FILE.tum beside it, as /dev/null.tum)."""
     if not text.strip():
-        raise argparse.ArgumentTypeError("expected a file name, got ''")
+        raise argparse.ArgumentTypeError(f"expected a file name, got {text!r}")
     path = Path(text)
     if path.is_dir() and not path.is_symlink():
         raise argparse.ArgumentTypeError(f"{text}: a directory of that name exists (never written into or over: name a new file or bag)")
+    if os.path.lexists(path) and not path.is_symlink() and not path.is_file():
+        raise argparse.ArgumentTypeError(f"{text}: exists and is not a regular file (a FIFO, device or socket is never written: name a new file)")
     return path
 
 
 def add_events_in_option(parser: argparse.ArgumentParser, *names: str) -> None:
     """`--events-in FILE`: an event log of live changes (`serve --events`) to apply at its times."""
     parser.add_argument(
-        "--events-in", *names, dest="events_in", type=Path, default=None, metavar="FILE",
+        "--events-in", *names, dest="events_in", type=named_path, default=None, metavar="FILE",
         help="apply this event log of live changes (written by serve --events) at its recorded times",
     )
 

@@ -25,9 +25,8 @@ latest --end that fits, so a huge --end never takes memory without bound.
 from __future__ import annotations
 
 import argparse
-import math
 
-from emulator.commands.options import add_scene_options, add_span_options, scene_from_args
+from emulator.commands.options import add_scene_options, add_span_options, scene_from_args, simulated_time
 from emulator.commands.progress import progress
 from emulator.errors import UserError
 from emulator.plots.map import MAX_MAP_BEAMS, draw_map
@@ -51,7 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--map", action="store_true",
                         help="a top-down map of the scene instead of a waterfall: at --time, or at --end with every "
                         "scan of --sensor from --start")
-    parser.add_argument("--time", type=float, default=None, metavar="T",
+    parser.add_argument("--time", type=simulated_time, default=None, metavar="T",
                         help="with --map: the one simulated time drawn (s, default 0); not with --start/--end")
     parser.add_argument("--width", type=int, default=1200, metavar="PX", help="image width in pixels")
     parser.add_argument("--height", type=int, default=800, metavar="PX", help="image height in pixels")
@@ -95,8 +94,6 @@ def _run_map(args: argparse.Namespace) -> int:
         time_s = args.end
     else:
         time_s = 0.0 if args.time is None else args.time
-        if not math.isfinite(time_s) or time_s < 0:
-            raise UserError(f"--time must be a finite time >= 0, got {time_s}")
     scene = scene_from_args(args)
     if args.sensor is not None and args.sensor not in {spec.name for spec in scene.sensors}:
         known = ", ".join(spec.name for spec in scene.sensors) or "none"

@@ -47,7 +47,7 @@ import math
 from pathlib import Path
 
 from emulator.commands.options import MAX_SIMULATED_TIME_S, add_events_in_option, add_scene_options, add_span_options, scene_from_args, world_from_args
-from emulator.commands.numbers import whole_number
+from emulator.commands.values import whole_number
 from emulator.commands.progress import progress
 from emulator.errors import UserError
 from emulator.recording.ground_truth import with_ground_truth
@@ -186,7 +186,9 @@ def _run_bag(args: argparse.Namespace, scene: Scene) -> int:
     frames = frame_names(args)
     world = world_from_args(scene, args)
     names = [name.strip() for name in args.sensor.split(",")]
-    if len(set(names)) != len(names) or not all(names):
+    if not all(names):
+        raise UserError(f"--sensor {args.sensor!r}: a sensor name is empty (expected NAME[,NAME...])")
+    if len(set(names)) != len(names):
         raise UserError(f"--sensor {args.sensor}: name each sensor once")
     sensors = [create_sensor(scene, name, world) for name in names]
     total = check_span(args, sensors)

@@ -42,7 +42,7 @@ LMS_WINDOWS = {(180, 1.0), (180, 0.5), (100, 1.0), (100, 0.5), (100, 0.25)}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("log", type=Path, metavar="LOG", help="a log written by `record` (or in its format), an MCAP file, or a ROS bag (ROS 2 directory, ROS 1 .bag)")
+    parser.add_argument("log", type=log_path, metavar="LOG", help="a log written by `record` (or in its format), an MCAP file, or a ROS bag (ROS 2 directory, ROS 1 .bag)")
     parser.add_argument("--topic", metavar="T", default=None,
                         help="for an MCAP file or a bag: the LaserScan topic to serve (default: its only one)")
     # --device: every other command's --model is the smoke preset
@@ -52,6 +52,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="pty:PATH, tcp:HOST:PORT or rfc2217:HOST:PORT (repeatable; default: a Hokuyo tcp:127.0.0.1:10940, lms200 pty:ttyLMS0,"
              " a CoLa SICK tcp:127.0.0.1:2111)",
     )
+
+
+def log_path(text: str) -> Path:
+    """An argparse type: LOG named (Path('') is '.', the working directory) and, if there, a file or a bag
+    directory: a FIFO blocked replay while it looked for the MCAP magic, and a pipe's bytes are read once."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a log file, got {text!r}")
+    path = Path(text)
+    if path.exists() and not path.is_dir() and not path.is_file():
+        raise argparse.ArgumentTypeError(f"{text}: is not a regular file (a FIFO or device cannot be replayed: give a log file)")
+    return path
 
 
 def lms_options(log: Log) -> dict[str, object]:
@@ -112,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
     log = read_log(args.log)
     sensor = replay_sensor(log, args.model, log.header.sensor or DEFAULT_NAMES[args.model])
     scene = replay_scene(log, args.model, args.endpoint)
-    serve_until_signalled(Daemon(scene, None, WallClock(), sensor_factory=lambda spec: sensor))
+    serve_until_signalled(Daemon(scene, _given(scene, args.endpoint), WallClock(), sensor_factory=lambda spec: sensor))
     return 0
 
 
@@ -124,5 +135,11 @@ def _run_mcap(args: argparse.Namespace) -> int:
     name = DEFAULT_NAMES[args.model]
     sensor = LaserScanReplay(scans, args.model, name)
     scene = sensor_only_scene(SensorSpec(name, args.model, Pose(), tuple(args.endpoint or [DEFAULT_ENDPOINTS[args.model]]), {}))
-    serve_until_signalled(Daemon(scene, None, WallClock(), sensor_factory=lambda spec: sensor))
+    serve_until_signalled(Daemon(scene, _given(scene, args.endpoint), WallClock(), sensor_factory=lambda spec: sensor))
     return 0
+
+
+def _given(scene: Scene, endpoints: list[str]) -> dict[str, list[str]] | None:
+    """The --endpoint URIs as the daemon's overrides of the replayed sensor, so an endpoint that cannot
+    serve is reported as `--endpoint NAME: ...`, not as the `scene: sensors[0].endpoints[0]` of no file."""
+    return {scene.sensors[0].name: list(endpoints)} if endpoints else None

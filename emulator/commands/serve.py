@@ -27,11 +27,13 @@ from emulator.commands.options import (
     MAX_SIMULATED_TIME_S,
     add_events_in_option,
     add_scene_options,
+    output_path,
     parse_listen,
     scene_from_args,
 )
 from emulator.commands import stopping
 from emulator.commands.stopping import STOP_SIGNALS
+from emulator.commands.values import bearer_token, named_path
 from emulator.control.events import ControlError, EventWriter, read_events
 from emulator.control.scan_feed import configured_request
 from emulator.control.server import DEFAULT_ADDRESS, ControlAddress, ControlServer, check_exposure, parse_control_address
@@ -65,10 +67,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help=f"the control API's address (default {DEFAULT_ADDRESS}; port 0 picks a free one; off: none)",
     )
     parser.add_argument(
-        "--control-token", default=None, metavar="TOKEN",
+        "--control-token", type=bearer_token, default=None, metavar="TOKEN",
         help="require Authorization: Bearer TOKEN on the control API (needed beyond loopback)",
     )
-    parser.add_argument("--events", type=Path, default=None, metavar="FILE", help="write each live change to FILE (JSON lines)")
+    parser.add_argument("--events", type=named_path, default=None, metavar="FILE", help="write each live change to FILE (JSON lines)")
     add_events_in_option(parser)
     parser.add_argument(
         "--sensors",
@@ -105,7 +107,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--foxglove", metavar="HOST:PORT", default="off",
                         help="stream the scene's Foxglove channels over Foxglove's WebSocket protocol (default off)")
-    parser.add_argument("--mcap", type=Path, metavar="FILE", default=None,
+    parser.add_argument("--mcap", type=mcap_path, metavar="FILE", default=None,
                         help="record the session's scans, transforms and scene to an MCAP file")
 
 
@@ -120,7 +122,19 @@ def endpoint_overrides(items: list[str]) -> dict[str, list[str]]:
     return overrides
 
 
+def mcap_path(text: str) -> Path:
+    """An argparse type: the MCAP file to write, a new or regular file, never written through a symbolic
+    link (its target was overwritten) and never a FIFO or device (a FIFO blocked serve before it served)."""
+    path = output_path(text)
+    if path.is_symlink():
+        raise argparse.ArgumentTypeError(f"{text} is a symbolic link: serve writes only files, never through links")
+    return path
+
+
 MAX_SPEED = 1000.0  # simulated seconds per wall second: beyond this scans could not keep up anyway
+
+
+MAX_UNIX_TIME_S = 1e11  # the year 5138: beyond it an epoch is a typo
 
 
 def unix_time(text: str) -> float:
@@ -131,6 +145,8 @@ def unix_time(text: str) -> float:
         raise argparse.ArgumentTypeError(f"expected UNIX seconds, got {text!r}") from None
     if not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"expected a finite UNIX time, got {text!r}")
+    if abs(value) > MAX_UNIX_TIME_S:  # its error would print the epoch's distance to now in 300 digits
+        raise argparse.ArgumentTypeError(f"expected a UNIX time within ±{MAX_UNIX_TIME_S:g} s, got {text!r}")
     return value
 
 

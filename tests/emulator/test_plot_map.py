@@ -174,7 +174,7 @@ def test_plot_map_command(scene_path: Path, tmp_path: Path) -> None:
 
 @pytest.mark.parametrize(("args", "message"), [
     (["--sensor", "nope"], "--sensor: no sensor named 'nope'"),
-    (["--time", "-1"], "--time must be a finite time >= 0"),
+    (["--time", "-1"], "argument --time: must be a time in 0..1e+07 s"),
     (["--smoke-scale", "-2"], "--smoke-scale must be between 0 and"),
 ])
 def test_plot_map_refuses_bad_options_in_one_line(scene_path: Path, tmp_path: Path, args: list[str], message: str) -> None:
