@@ -12,7 +12,7 @@ from emulator.control.events import read_events, world_events
 from emulator.commands.values import named_path, whole_number
 from emulator.errors import UserError
 from emulator.optics import World
-from emulator.scene import Scene, bundled_scenes, load_scene
+from emulator.scene import Scene, load_scene
 from emulator.scene.smoke_scale import scale_smoke
 from emulator.sensors.response import apply_model_override
 
@@ -42,7 +42,7 @@ def add_scene_options(parser: argparse.ArgumentParser, *, optional_scene: bool =
 
 def scene_from_args(args: argparse.Namespace) -> Scene:
     """The scene named on the command line, with its `--model` and `--seed` overrides applied."""
-    scene = apply_model_override(load_scene(scene_argument(args.scene)), args.model)
+    scene = apply_model_override(load_scene(args.scene), args.model)
     if getattr(args, "seed", None) is not None:
         scene = dataclasses.replace(scene, seed=args.seed)
     if args.smoke_scale is not None:
@@ -50,17 +50,6 @@ def scene_from_args(args: argparse.Namespace) -> Scene:
             raise UserError(f"--smoke-scale must be between 0 and {MAX_SMOKE_SCALE:g}, got {args.smoke_scale}")
         scene = scale_smoke(scene, args.smoke_scale)
     return scene
-
-
-def scene_argument(text: str) -> str:
-    """SCENE as given, unless it names a directory that is no bundled scene's name (a bundled name wins
-    over a directory of that name in the working directory): a UserError saying so, not "no such scene"."""
-    if os.path.isdir(text) and text not in {bundled.name for bundled in bundled_scenes()}:
-        raise UserError(f"{text}: is a directory, not a scene file (give a scene's .toml file or a bundled scene's name)")
-    read_as_path = "/" in text or text.endswith(".toml")  # as scene/loader.py tells a path from a bundled name
-    if read_as_path and os.path.exists(text) and not os.path.isfile(text):  # a FIFO, a device: not "no such scene"
-        raise UserError(f"{text}: is not a regular file (give a scene's .toml file or a bundled scene's name)")
-    return text
 
 
 MAX_SIMULATED_TIME_S = 1e7  # 115 days: far beyond any run, far inside the µs grid's exact range

@@ -153,6 +153,11 @@ def _locate(name_or_path: str | os.PathLike[str]) -> Path:
     is_bundled_name = "/" not in text and not text.endswith(SCENE_SUFFIX)
     path = _bundled_dir() / f"{text}{SCENE_SUFFIX}" if is_bundled_name else Path(text)
     if not text or not path.is_file():
+        hint = "give a scene's .toml file or a bundled scene's name"
+        if text and os.path.isdir(text):  # a bundled name wins over a directory of that name (it is found above)
+            raise SceneError(f"{text}: is a directory, not a scene file ({hint})")
+        if not is_bundled_name and os.path.exists(text):  # a FIFO, a device: there, but not a file to read
+            raise SceneError(f"{text}: is not a regular file ({hint})")
         known = ", ".join(path.stem for path in _bundled_paths()) or "none"
         raise SceneError(f"no such scene: {text!r} (bundled: {known})")
     return path.resolve()

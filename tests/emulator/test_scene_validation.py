@@ -229,7 +229,7 @@ def test_a_missing_scene_lists_the_bundled_ones(tmp_path: Path) -> None:
 
 def test_a_directory_is_not_a_scene(tmp_path: Path) -> None:
     (tmp_path / "dir.toml").mkdir()
-    with pytest.raises(SceneError, match=r"^no such scene: '.*dir\.toml' \(bundled: "):
+    with pytest.raises(SceneError, match=r"^.*dir\.toml: is a directory, not a scene file \(give a scene's \.toml file"):
         load_scene(tmp_path / "dir.toml")
 
 
