@@ -215,8 +215,8 @@ def span_points(scene: Scene, sensor: str, start_s: float, end_s: float, max_bea
                      scans=len(times))
 
 
-def _beams(count: int) -> str:
-    return f"{count} beam" if count == 1 else f"{count} beams"
+def _counted(count: int, noun: str) -> str:
+    return f"{count} {noun}" if count == 1 else f"{count} {noun}s"
 
 
 def _extent(parts: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -321,10 +321,10 @@ def draw_map(
         ticks = np.stack([scan.error_origins + ERROR_TICKS[0] * width_m * directions,
                           scan.error_origins + ERROR_TICKS[1] * width_m * directions], axis=1)
         axes.add_collection(LineCollection(ticks, colors=[ERROR_CODE_RGB], linewidths=1.0, zorder=7))
-        scans = "" if since_s is None else f" ({scan.scans} scan{'' if scan.scans == 1 else 's'})"
+        scans = "" if since_s is None else f" ({_counted(scan.scans, 'scan')})"
         legend.line(SCAN_RGB, f"scan points of {sensor}{scans}", marker=".", linestyle="none")
         legend.line(SENSOR_RGB, sensor, marker="+", linestyle="none", markeredgewidth=2)
-        legend.line(ERROR_CODE_RGB, f"error codes ({_beams(len(scan.error_angles))})")
+        legend.line(ERROR_CODE_RGB, f"error codes ({_counted(len(scan.error_angles), 'beam')})")
     if title is None:
         title = f"{scene.name}: t = {time_s:g} s" + (f", scan of {sensor}" if sensor else "")
         if since_s is not None and sensor:
