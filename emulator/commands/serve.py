@@ -38,7 +38,7 @@ from emulator.control.events import ControlError, EventWriter, read_events
 from emulator.control.scan_feed import configured_request
 from emulator.control.server import DEFAULT_ADDRESS, ControlAddress, ControlServer, check_exposure, parse_control_address
 from emulator.control.session import LiveSession
-from emulator.daemon.clock import WallClock
+from emulator.daemon.clock import MAX_SPEED, MIN_SPEED, WallClock
 from emulator.daemon.memory import keep_freed_memory
 from emulator.daemon.workers import WORKER_NICE
 from emulator.daemon.service import Daemon, Ready
@@ -131,9 +131,6 @@ def mcap_path(text: str) -> Path:
     return path
 
 
-MAX_SPEED = 1000.0  # simulated seconds per wall second: beyond this scans could not keep up anyway
-
-
 MAX_UNIX_TIME_S = 1e11  # the year 5138: beyond it an epoch is a typo
 
 
@@ -151,8 +148,8 @@ def unix_time(text: str) -> float:
 
 
 def run(args: argparse.Namespace) -> int:
-    if not (math.isfinite(args.speed) and 0 < args.speed <= MAX_SPEED):
-        raise UserError(f"--speed must be > 0 and <= {MAX_SPEED:g}, got {args.speed}")
+    if not (math.isfinite(args.speed) and MIN_SPEED <= args.speed <= MAX_SPEED):
+        raise UserError(f"--speed must be >= {MIN_SPEED:g} and <= {MAX_SPEED:g}, got {args.speed:g}")
     overrides = endpoint_overrides(args.endpoint)
     watching = Watching.from_args(args)
     scene = scene_from_args(args)

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, TextIO
 
+from emulator.daemon.clock import MAX_SPEED, MIN_SPEED
 from emulator.errors import SceneError, UserError
 from emulator.scene.drive import Twist
 from emulator.scene.live import ClockChange, LiveEvent, PlumeChange, PoseChange, RegionChange, TwistChange, event_record
@@ -44,7 +45,6 @@ POSE_KEYS = ("position", "rotation_deg", "yaw_deg")
 TWIST_KEYS = ("vx", "vy", "wz")
 RESOLVED_KEYS = ("until",)  # what the daemon adds to a twist when it applies it: not part of the log
 CLOCK_KEYS = ("speed", "paused")
-MAX_SPEED = 1000.0  # simulated seconds per wall second the API accepts
 TIME_DECIMALS = 6  # event times are on the µs grid
 
 
@@ -150,7 +150,7 @@ def _clock_change(body: Any, time_s: float, where: str) -> ClockChange:
     _at_least_one(values, CLOCK_KEYS, where)
     return ClockChange(
         time_s,
-        speed=_read(values.number, "speed", above=0, at_most=MAX_SPEED) if "speed" in values else None,
+        speed=_read(values.number, "speed", at_least=MIN_SPEED, at_most=MAX_SPEED) if "speed" in values else None,
         paused=_read(values.boolean, "paused") if "paused" in values else None,
     )
 

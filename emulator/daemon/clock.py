@@ -6,6 +6,9 @@ import math
 import time
 from typing import Callable
 
+MIN_SPEED = 1e-3  # simulated seconds per wall second: slower is a pause in all but name (pause for that)
+MAX_SPEED = 1000.0  # beyond this scans could not keep up anyway
+
 
 class WallClock:
     """Simulated seconds advance at `speed` × wall seconds, unless paused.
@@ -57,8 +60,8 @@ class WallClock:
 
 
 def _check_speed(speed: float) -> None:
-    if not (math.isfinite(speed) and speed > 0):
-        raise ValueError(f"speed must be > 0, got {speed}")
+    if not (math.isfinite(speed) and MIN_SPEED <= speed <= MAX_SPEED):
+        raise ValueError(f"speed must be >= {MIN_SPEED:g} and <= {MAX_SPEED:g}, got {speed}")
 
 
 class ManualClock:

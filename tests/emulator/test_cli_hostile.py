@@ -154,3 +154,10 @@ def test_a_token_http_cannot_carry_is_refused_up_front(tmp_path: Path, token: st
     assert line.startswith("lrf-emulator ctl: argument --token: expected visible ASCII"), line
     line = refusal(tmp_path, "serve", "bocas", "--control-token", token, *REFUSED_LATER)
     assert line.startswith("lrf-emulator serve: argument --control-token: expected visible ASCII"), line
+
+
+@pytest.mark.parametrize("value", ["1e-320", "0.0009", "0"])
+def test_serve_refuses_a_speed_that_all_but_stops_the_clock(tmp_path: Path, value: str) -> None:
+    """`--speed 1e-320` was taken: simulated time then crept so slowly that no scan ever came due."""
+    line = refusal(tmp_path, "serve", "bocas", "--speed", value, *REFUSED_LATER)
+    assert line.startswith("lrf-emulator serve: --speed must be >= 0.001 and <= 1000, got"), line

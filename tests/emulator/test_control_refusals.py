@@ -41,6 +41,15 @@ def daemon(room: Path):
         assert process.process.poll() is None, process.stderr
 
 
+def test_a_speed_that_all_but_stops_the_clock_is_refused(daemon: ServeProcess) -> None:
+    """`{"speed": 1e-320}` was applied: the clock all but stopped, with no scan due again and no pause shown."""
+    before = call(daemon.control_url, "GET", "/api/state")[1]["speed"]
+    assert call(daemon.control_url, "PATCH", "/api/clock", {"speed": 1e-320}) == (
+        400, {"error": "clock.speed: must be >= 0.001, got 1e-320", "key": "clock.speed"}
+    )
+    assert call(daemon.control_url, "GET", "/api/state")[1]["speed"] == before
+
+
 def test_a_json_null_is_refused_in_jsons_words(daemon: ServeProcess) -> None:
     """The scene loader shows a refused value as TOML writes it, and TOML has no null: a null in a
     change read "got None". Over HTTP and WebSocket alike it reads "got null", still a 400 with the

@@ -182,6 +182,8 @@ def test_the_wall_clock_is_continuous_when_its_speed_or_pause_changes() -> None:
     assert clock.now() == 4.0
     with pytest.raises(ValueError):
         clock.set(speed=0.0)
+    with pytest.raises(ValueError, match="speed must be >= 0.001"):
+        clock.set(speed=1e-320)
 
 
 def test_a_stream_of_changes_keeps_one_job_per_scan_under_way(railway) -> None:
