@@ -21,12 +21,15 @@ from emulator.errors import UserError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--url", default=DEFAULT_URL, help=f"the control API (default {DEFAULT_URL})")
-    parser.add_argument("--token", type=bearer_token, default=None, help="Bearer token, if serve has --control-token")
+    _connection_options(parser, DEFAULT_URL, None)
     actions = parser.add_subparsers(dest="action", metavar="ACTION", parser_class=type(parser))
     actions.required = True
     def action(name: str, help_text: str) -> argparse.ArgumentParser:
-        return actions.add_parser(name, help=help_text, description=help_text)
+        action_parser = actions.add_parser(name, help=help_text, description=help_text)
+        # after the action too (`ctl watch lidar --url ...`); SUPPRESS keeps one given before it
+        _connection_options(action_parser, argparse.SUPPRESS, argparse.SUPPRESS)
+        action_parser.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="show tracebacks for errors")
+        return action_parser
 
     action("state", "print the live state as JSON")
     setter = action("set", "set a smoke region's density: set region NAME density D")
@@ -56,6 +59,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     watch = action("watch", "watch SENSOR: a line per scan, until interrupted or --count scans")
     watch.add_argument("sensor", metavar="SENSOR", help="a sensor's name in the scene")
     watch.add_argument("--count", type=whole_number(1), default=None, metavar="N", help="stop after N scans")
+
+
+def _connection_options(parser: argparse.ArgumentParser, url: str, token: str | None) -> None:
+    parser.add_argument("--url", default=url, help=f"the control API (default {DEFAULT_URL})")
+    parser.add_argument("--token", type=bearer_token, default=token, help="Bearer token, if serve has --control-token")
 
 
 def run(args: argparse.Namespace) -> int:

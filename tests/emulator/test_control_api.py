@@ -373,6 +373,12 @@ def test_ctl_says_what_went_wrong_in_one_line_and_exits_2(daemon: ServeProcess) 
     wrong_port = ctl("state", url=f"http://127.0.0.1:{daemon.endpoint('urg', 'tcp').address[1]}")  # a device's port
     assert wrong_port.returncode == 2 and wrong_port.stderr.count("\n") == 1 and "does not answer HTTP" in wrong_port.stderr
     assert ctl("watch", "lms", "--count", "0").returncode == 2
+    # the connection options and --debug after the action, as users type them (they were "unrecognized")
+    after = subprocess.run([*serve_command(), "ctl", "watch", "lms", "--count", "1", "--url", daemon.control_url, "--debug"],
+                           capture_output=True, text=True, timeout=30)
+    assert after.returncode == 0 and " lms " in after.stdout, after.stderr
+    overridden = ctl("state", "--url", daemon.control_url, url="http://127.0.0.1:9")  # the later --url wins
+    assert overridden.returncode == 0 and "time_s" in json.loads(overridden.stdout), overridden.stderr
 
 
 def test_watchers_that_go_away_leave_the_daemon_quiet(room: Path) -> None:
