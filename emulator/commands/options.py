@@ -67,13 +67,14 @@ def simulated_time(text: str) -> float:
 
 
 def add_span_options(
-    parser: argparse.ArgumentParser, *, verb: str, out_metavar: str, out_help: str, required: bool = True
+    parser: argparse.ArgumentParser, *, verb: str, out_metavar: str, out_help: str, required: bool = True,
+    start_help: str = "first simulated time (s)", end_help: str = "last simulated time (s)",
 ) -> None:
     """`--sensor NAME --start T0 --end T1 --out FILE`: one sensor's scans over a span of simulated time
     (`required=False`: the caller checks --sensor and --end itself, for modes that need neither)."""
     parser.add_argument("--sensor", required=required, metavar="NAME", help=f"the scene's sensor to {verb}")
-    parser.add_argument("--start", type=simulated_time, default=0.0, metavar="T0", help="first simulated time (s)")
-    parser.add_argument("--end", type=simulated_time, required=required, metavar="T1", help="last simulated time (s)")
+    parser.add_argument("--start", type=simulated_time, default=0.0, metavar="T0", help=start_help)
+    parser.add_argument("--end", type=simulated_time, required=required, metavar="T1", help=end_help)
     parser.add_argument("--out", required=True, type=output_path, metavar=out_metavar, help=out_help)
 
 

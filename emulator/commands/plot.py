@@ -38,15 +38,14 @@ MAX_PIXELS = 8000
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_scene_options(parser)
-    add_span_options(parser, verb="plot (with --map: whose scans to draw)", out_metavar="FILE.png",
-                     out_help="image to write, in the format its suffix names (png, svg, pdf, jpg, ...)", required=False)
+    add_span_options(
+        parser, verb="plot (with --map: whose scans to draw)", out_metavar="FILE.png",
+        out_help="image to write, in the format its suffix names (png, svg, pdf, jpg, ...)", required=False,
+        start_help="first simulated time (s, default 0); with --map: draw every scan of --sensor from T0 to --end",
+        end_help=f"last simulated time (s); a span of more than {MAX_PLOT_BEAMS} beams for a waterfall, {MAX_MAP_BEAMS} "
+        "for a map, is refused (a URG-04LX: 880 s, 130 s); with --map: the instant the scene is drawn at",
+    )
     parser.set_defaults(start=None)  # given or not: with --map, a span is asked for only when --start or --end is
-    options = parser._option_string_actions  # noqa: SLF001 (argparse has no public setter for a shared option's help)
-    options["--start"].help = ("first simulated time (s, default 0); with --map: draw every scan of --sensor "
-                               "from T0 to --end")
-    options["--end"].help = (f"last simulated time (s); a span of more than {MAX_PLOT_BEAMS} beams for a waterfall, "
-                             f"{MAX_MAP_BEAMS} for a map, is refused (a URG-04LX: 880 s, 130 s); with --map: the "
-                             "instant the scene is drawn at")
     parser.add_argument("--map", action="store_true",
                         help="a top-down map of the scene instead of a waterfall: at --time, or at --end with every "
                         "scan of --sensor from --start")

@@ -71,8 +71,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "mcap: FILE.mcap (and FILE.mcap.tum); rosbag1: FILE.bag; rosbag2: a new bag directory DIR named without a "
         "suffix (DIR/metadata.yaml, DIR/DIR.mcap), so an --out ending in .mcap or .bag is refused for rosbag2, as "
         "is one of those for any other format than its own, and .db3 always (record writes no SQLite bags)",
+        end_help="last simulated time (s); a span of more than --max-scans scans is refused",
     )
-    _set_help(parser, "--end", "last simulated time (s); a span of more than --max-scans scans is refused")
     parser.add_argument(
         "--max-scans", type=whole_number(1), default=MAX_SCANS, metavar="N",
         help=f"refuse a span of more than N scans of all --sensor together, before writing anything "
@@ -93,11 +93,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     bag.add_argument("--map-frame", default=FrameNames.map, metavar="NAME", help="REP 105 map frame (default map)")
     bag.add_argument("--odom-frame", default=FrameNames.odom, metavar="NAME", help="REP 105 odom frame (default odom)")
     bag.add_argument("--base-frame", default=FrameNames.base, metavar="NAME", help="the robot's frame (default base_link)")
-
-
-def _set_help(parser: argparse.ArgumentParser, option: str, text: str) -> None:
-    """Replace the help of an option a shared helper added (emulator/commands/options.py) with record's own."""
-    parser._option_string_actions[option].help = text  # noqa: SLF001 (argparse has no public setter)
 
 
 def bag_epoch(text: str) -> float:
