@@ -24,7 +24,6 @@ from emulator.bench.trajectory import TrajectoryError, absolute_trajectory_error
 from emulator.optics import World
 from emulator.plots.map import draw_map, sensor_poses_2d
 from emulator.scene import Scene, load_scene
-from emulator.scene.model import SensorSpec
 from emulator.scene.smoke_scale import scale_smoke
 from emulator.sensors import Scan, beam_times_s, create_sensor, ranges_m
 from emulator.sensors.response import apply_model_override

@@ -21,8 +21,6 @@ import dataclasses
 import json
 import math
 import os
-
-import numpy as np
 import re
 import tomllib
 from dataclasses import dataclass
@@ -31,13 +29,13 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any, Iterable, Mapping, Sequence
 
+import numpy as np
+
 from emulator.errors import SceneError, UserError
 from emulator.scene.bodies import LIVE, Body, Keyframes, Trajectory, euler_quaternion
 from emulator.scene import drive as drive_defaults
 from emulator.scene.drive import Drive
 from emulator.scene.endpoints import Address, EndpointClaims, parse_endpoint
-
-ENDPOINT_SYNTAX = '"pty:PATH", "tcp:HOST:PORT" or "rfc2217:HOST:PORT" with PORT 0..65535'
 from emulator.scene.geometry import MeshLoadError, load_mesh_file
 from emulator.scene.materials import BUILTIN_MATERIALS, DEFAULT_MATERIAL
 from emulator.scene.sick_models import ANGLE_TICKS_PER_DEG, FREQUENCY_TICKS_PER_HZ
@@ -59,6 +57,7 @@ from emulator.scene.model import (
     Vec3,
 )
 
+ENDPOINT_SYNTAX = '"pty:PATH", "tcp:HOST:PORT" or "rfc2217:HOST:PORT" with PORT 0..65535'
 BUNDLED_PACKAGE = "emulator.bundled_scenes"
 SCENE_SUFFIX = ".toml"
 

@@ -3,7 +3,6 @@ solids, each beam cast at the instant its step is measured, and the ground truth
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 import subprocess

@@ -21,7 +21,7 @@ STAY = 3
 
 def _read(selector: selectors.BaseSelector, seconds: float) -> None:
     end = time.monotonic() + seconds
-    while (now := time.monotonic()) < end:
+    while time.monotonic() < end:
         for key, _ in selector.select(timeout=0.05):
             data = key.fileobj.recv(65536)
             assert data, "the daemon closed a stream"

@@ -6,7 +6,6 @@ unit sends, reflector bits from a retro-reflective material in the scene."""
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -217,7 +217,7 @@ def instant_passes(beams: Sequence[Beams], puffs_per_pass: int) -> list[slice]:
 def beam_physics_at(instants: Instants, receiver: ReceiverOptics, params: PhysicalParams) -> BeamPhysics:
     """Surfaces and smoke echoes of the beams at K instants as `receiver` sees them, rows stacked as
     in `instants`: each pass's numpy calls are shared by all K, per scan far cheaper than one at a time."""
-    hits, beams = instants.hits, instants.beams
+    beams = instants.beams
     scene = beams.scene
     extinction = scene.density_to_extinction
     crossings = instants.crossings()
