@@ -3,7 +3,10 @@
 A sans-I/O state machine like `UrgDevice`: bytes and simulated time in, whole
 messages out. What differs from the URG-04LX (docs/scip.md):
 
-- commands are answered when they arrive (no 100 ms command cycle);
+- commands are answered when they arrive (no 100 ms command cycle), one at a
+  time: a command that arrives while a single scan's reply waits for its data
+  runs once that reply has left (a pipelined MD's echo precedes its scans, a
+  TM1 behind a GD reads the timer when the GD is done);
 - the mirror turns in `period_ms` (25 ms); scan k's sweep starts at
   phase + k · period, and its time stamp is that instant (the SCIP 2.0
   specification: "a timer value at 0th step of every scan"). Its data leave
@@ -41,7 +44,7 @@ from protocols.scip.streaming import (
     milliseconds,
 )
 
-MAX_QUEUED_REPLIES = 32  # replies waiting for their scan; further lines are lost (bounded under a flood)
+MAX_WAITING_COMMANDS = 32  # lines waiting behind a single scan's reply; further lines are lost (bounded under a flood)
 
 SINGLE_SCAN = frozenset({b"GD", b"GS", b"GE", b"HD", b"HE"})
 STREAMING = frozenset({b"MD", b"MS", b"ME", b"ND", b"NE"})
@@ -136,7 +139,8 @@ class Scip22Device(StreamingDevice):
         self._serial = serial or self.profile.default_serial
         self._epoch_ms = milliseconds(start_time)
         self._lines = LineSplitter()
-        self._pending: deque[_Pending] = deque()
+        self._pending: _Pending | None = None  # the single scan's reply under way: later commands wait
+        self._waiting: deque[Line] = deque()
         self._last_single_scan = -1  # a GD reports a scan no earlier GD reported
         self.lost_commands = 0
         self._laser_on = False
@@ -156,36 +160,43 @@ class Scip22Device(StreamingDevice):
     def receive(self, data: bytes, now: float) -> list[Output]:
         outputs = self.poll(now)
         for line in self._lines.feed(data):
-            if len(self._pending) >= MAX_QUEUED_REPLIES:
-                self.lost_commands += 1
-                continue
-            reply = self._reply(line, now)
-            if isinstance(reply, _Pending):
-                self._pending.append(reply)
-            elif self._pending:  # replies leave in command order
-                self._pending.append(_Pending(self._pending[-1].due, self._pending[-1].scan_time, lambda r=reply: r))
+            if self._pending is None:
+                reply = self._reply(line, now)
+                if isinstance(reply, _Pending):
+                    self._pending = reply
+                else:
+                    outputs.append(Output(reply))
+            elif len(self._waiting) < MAX_WAITING_COMMANDS:
+                self._waiting.append(line)
             else:
-                outputs.append(Output(reply))
+                self.lost_commands += 1
         return outputs
 
     def poll(self, now: float) -> list[Output]:
-        """Replies and streamed scans whose data have left by `now`, in time order."""
+        """Replies and streamed scans whose data have left by `now`, in time order; the commands
+        that waited behind a reply run when it leaves, at its time."""
         outputs: list[tuple[float, int, Output]] = []
-        while self._pending and self._pending[0].due <= now + EPSILON_S:
-            item = self._pending.popleft()
+        while self._pending is not None and self._pending.due <= now + EPSILON_S:
+            item, self._pending = self._pending, None
             outputs.append((item.due, len(outputs), Output(item.build())))
+            while self._waiting and self._pending is None:
+                reply = self._reply(self._waiting.popleft(), item.due)
+                if isinstance(reply, _Pending):
+                    self._pending = reply
+                else:
+                    outputs.append((item.due, len(outputs), Output(reply)))
         outputs += [(due, len(outputs) + i, output) for i, (due, output) in enumerate(self._stream_until(now))]
         return [output for _, _, output in sorted(outputs, key=lambda entry: entry[:2])]
 
     def next_deadline(self) -> float | None:
-        deadlines = [self._pending[0].due] if self._pending else []
+        deadlines = [self._pending.due] if self._pending is not None else []
         if self._stream is not None:
             deadlines.append(self._departure(self._stream.next_index, self._stream.request))
         return min(deadlines, default=None)
 
     def next_scan_time(self) -> float | None:
         """The scan wanted at `next_deadline`: its sweep started earlier than its data leave."""
-        candidates = [(self._pending[0].due, self._pending[0].scan_time)] if self._pending else []
+        candidates = [(self._pending.due, self._pending.scan_time)] if self._pending is not None else []
         if self._stream is not None:
             index = self._stream.next_index
             candidates.append((self._departure(index, self._stream.request), self._scan_time(index)))
@@ -203,7 +214,8 @@ class Scip22Device(StreamingDevice):
     def connection_lost(self) -> None:
         """Streaming stops and unanswered commands are forgotten; the unit keeps its timer."""
         self._lines.reset()
-        self._pending.clear()
+        self._pending = None
+        self._waiting.clear()
         self._stream = None
         self._adjust_mode = False
 

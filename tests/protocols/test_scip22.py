@@ -323,6 +323,36 @@ def test_a_late_poll_sends_only_the_newest_scan():
     assert [read_reply(o.data)[0] for o in device.poll(1.0) if o.droppable] == [b"MD0000108001000"]
 
 
+def test_commands_pipelined_behind_a_gd_run_one_at_a_time_after_it():
+    """`GD…MD…` in one write sent the MD's first scan before the GD's reply and the MD's own echo (a
+    driver checking the echo threw it away); commands behind a GD took effect when they arrived, so a
+    TM1 read the timer ~30 ms before its reply left. Now each runs when the reply ahead of it has left."""
+    device = Scip22Device(flat(), "ust-20lx")
+    device.receive(b"BM\n", 0.0)
+    outputs = device.receive(b"GD0000108000\nTM1\nMD0000001000003\n", 5.0101)
+    while (deadline := device.next_deadline()) is not None:
+        outputs += device.poll(deadline)
+    echoes = [o.data.split(b"\n")[0] for o in outputs]
+    assert echoes == [b"GD0000108000", b"TM1", b"MD0000001000003", *[b"MD000000100000%d" % n for n in (2, 1, 0)]]
+    gd_stamp = read_reply(outputs[0].data)[2]
+    gd_left_ms = gd_stamp + 25 * 1080 / 1440  # the GD's data leave once the mirror has swept step 1080
+    tm1_timer = decode(outputs[1].data.split(b"\n")[2][:4])
+    assert abs(tm1_timer - gd_left_ms) <= 1  # read when the GD was done, not when it arrived
+    assert [read_reply(o.data)[2] for o in outputs[3:]] == [gd_stamp + 25 * k for k in (1, 2, 3)]
+
+
+def test_a_qt_behind_a_gd_lets_the_gd_measure_first():
+    device = Scip22Device(flat(), "utm-30lx-ew")
+    device.receive(b"BM\n", 0.0)
+    outputs = device.receive(b"GD0000108000\nQT\nGD0000108000\n", 1.0)
+    assert device.laser_on  # the QT waits for the GD (it switched the laser off while the GD measured)
+    outputs += device.poll(2.0)
+    assert not device.laser_on
+    statuses = [o.data.split(b"\n")[:2] for o in outputs]
+    assert [echo for echo, _ in statuses] == [b"GD0000108000", b"QT", b"GD0000108000"]
+    assert [status[:2] for _, status in statuses] == [b"00", b"00", b"10"]  # the laser went off between the two
+
+
 # --- fuzzing ------------------------------------------------------------------------------
 
 COMMANDS = [
