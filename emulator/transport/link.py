@@ -59,8 +59,9 @@ class Link:
     INPUT_SLICE_BYTES at a time, one slice per turn, and the client is not read
     again until its last read is used up; a client whose input has cost more
     than INPUT_CPU_SHARE of the loop's time waits until it is back within it. While more replies wait unread than
-    the outbox holds, input is discarded at no cost beyond counting it, as a
-    device whose receive buffer overflows loses bytes.
+    the outbox holds, the client is not read until it has taken enough of them: its bytes wait in
+    the kernel (TCP's window, the tty's buffer) and its writes block, as a device's flow control
+    makes them; none is lost, and what the daemon holds stays bounded.
     """
 
     def __init__(
@@ -77,7 +78,8 @@ class Link:
         kernel_backlog: Callable[[], int] | None = None,
     ) -> None:
         self.outbox = Outbox(limit_bytes, kernel_backlog)
-        self.discarded_input = 0  # bytes dropped: wrong baud, or replies piling up unread
+        self.discarded_input = 0  # bytes dropped: a pty client at the wrong baud
+        self._stalled = False  # input waits until the client has read the replies piled up
         self._loop = loop
         self._fd = fd
         self._read = read
@@ -124,6 +126,7 @@ class Link:
             self._feeding.cancel()
             self._feeding = None
         self._unfed = memoryview(b"")
+        self._stalled = False
         if self._waiting_writable:
             self._loop.remove_writer(self._fd)
             self._waiting_writable = False
@@ -160,14 +163,13 @@ class Link:
         self._feeding = None
         if not self._open:
             return
-        piece, self._unfed = self._unfed[:INPUT_SLICE_BYTES], self._unfed[INPUT_SLICE_BYTES:]
         if self.outbox.pending_bytes > self.outbox.limit_bytes:
-            self.discarded_input += len(piece) + len(self._unfed)
-            self._unfed = memoryview(b"")
-        else:
-            started = time.thread_time()
-            self._session.received(bytes(piece))
-            self._cpu_credit -= time.thread_time() - started
+            self._stalled = True  # fed again by _pump once the client has read enough
+            return
+        piece, self._unfed = self._unfed[:INPUT_SLICE_BYTES], self._unfed[INPUT_SLICE_BYTES:]
+        started = time.thread_time()
+        self._session.received(bytes(piece))
+        self._cpu_credit -= time.thread_time() - started
         if not self._open:
             return
         now = self._loop.time()
@@ -214,6 +216,9 @@ class Link:
             self.outbox.consume(written)
             if written > 0:
                 self.last_activity = now
+            if self._stalled and self.outbox.pending_bytes <= self.outbox.limit_bytes:
+                self._stalled = False
+                self._feeding = self._loop.call_soon(self._feed_slice)
             if written < len(data):
                 self._loop.add_writer(self._fd, self._on_writable)
                 self._waiting_writable = True

@@ -169,3 +169,27 @@ def test_a_client_that_stops_reading_costs_another_sensor_nothing(served: ServeP
     finally:
         stalled.close()
     assert answers(served, "utm-30lx-ew")
+
+
+def test_commands_written_without_reading_are_all_answered_once_the_client_reads(served: ServeProcess) -> None:
+    """A client streaming scans writes 3000 VVs and a QT without reading, then reads. Replies past
+    the outbox's bound used to make the daemon discard the client's further input: 512 VVs were
+    answered, the QT was lost and the stream ran on. Now the client is not read until it has read
+    (its bytes wait in the kernel, as with a real unit's TCP window): every command is answered, in
+    order, and the QT ends the stream."""
+    count = 3000
+    client = open_raw(uri(served, "ust-10lx"))
+    try:
+        client.send(b"MD0000108000000\n" + b"VV\n" * count + b"QT\n", timeout_s=10.0)
+        time.sleep(1.0)  # replies pile up unread past the outbox's bound
+        received = b""
+        deadline = time.monotonic() + 30.0
+        while b"QT\n00P\n\n" not in received and time.monotonic() < deadline:
+            received += client.drain(0.1)
+        assert received.count(b"VV\n00P\n") == count
+        assert b"QT\n00P\n\n" in received
+        after_qt = received.split(b"QT\n00P\n\n", 1)[1] + client.drain(0.3)
+        assert b"MD0000108000000\n99b\n" not in after_qt  # the stream stopped
+    finally:
+        client.close()
+    assert answers(served, "ust-10lx")
