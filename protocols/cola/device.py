@@ -141,6 +141,7 @@ class ColaUnit:
         self.telegram_counter = 0
         self._epoch_s = power_on_s  # scans complete at epoch + k · period since the last change
         self._scans_before_epoch = 0
+        self.epoch = 0  # counts the changes: a stream's scan indices are those of one epoch
 
     def _factory(self) -> Settings:
         model = self.model
@@ -170,6 +171,7 @@ class ColaUnit:
         """New scan settings from `now` on: the mirror's scans restart counting there."""
         self._scans_before_epoch += self.scan_index(now)
         self._epoch_s = now
+        self.epoch += 1
         self.settings = dataclasses.replace(self.settings, **changes)
 
     def save(self) -> None:
@@ -179,6 +181,7 @@ class ColaUnit:
         self.settings = dataclasses.replace(self._saved)
         self.power_on_s = self._epoch_s = now
         self._scans_before_epoch = 0
+        self.epoch += 1
         self.telegram_counter = 0
 
     def load_defaults(self, now: float) -> None:
@@ -194,7 +197,15 @@ class ColaUnit:
 class _Stream:
     dialect: Dialect
     next_index: int
+    epoch: int  # the unit's epoch its indices count in
     last_sent: int = -1  # the newest scan index a telegram carried
+
+    def follow(self, unit: ColaUnit) -> None:
+        """After the unit's scans restarted counting (new settings, measuring again, a reboot from any
+        port), stream on from the epoch's first new scan (its scan 0 is the last one before the change):
+        the old indices waited for the new count to catch up, seconds to minutes without a scan."""
+        if self.epoch != unit.epoch:
+            self.epoch, self.next_index, self.last_sent = unit.epoch, 1, 0
 
 
 @dataclass
@@ -280,6 +291,7 @@ class ColaDevice:
         unit = self.unit
         if stream is None or not unit.settings.measuring:
             return []
+        stream.follow(unit)
         latest = unit.scan_index(now)
         if stream.next_index > latest:
             return []
@@ -301,6 +313,7 @@ class ColaDevice:
         stream = self._session.stream
         if stream is None or not self.unit.settings.measuring:
             return None
+        stream.follow(self.unit)
         return self.unit.scan_time(stream.next_index)
 
     def next_scan_time(self) -> float | None:
@@ -506,7 +519,7 @@ class ColaDevice:
         if enable > 1:
             return LOCAL_CONDITION_FAILED
         if enable:
-            self._session.stream = _Stream(dialect, self.unit.scan_index(now) + 1)
+            self._session.stream = _Stream(dialect, self.unit.scan_index(now) + 1, self.unit.epoch)
         else:
             self._session.stream = None
         return [u8(enable)]
@@ -526,9 +539,7 @@ class ColaDevice:
         scan_time = unit.scan_time(index)
         unit.telegram_counter += 1
         count = model.beam_count(settings.resolution_ticks)
-        first = int(math.ceil((settings.output_start_ticks - model.start_ticks) / settings.resolution_ticks - 1e-9))
-        last = int(math.floor((settings.output_stop_ticks - model.start_ticks) / settings.resolution_ticks + 1e-9))
-        first, last = max(0, first), min(count - 1, last)
+        first, last = _output_beams(settings.output_start_ticks, settings.output_stop_ticks, model.start_ticks, model.stop_ticks, count)
         start_ticks = model.start_ticks + int(round(first * (model.stop_ticks - model.start_ticks) / (count - 1)))
         distances, intensities = _selected_echoes(scan, settings, model)
         channels = []
@@ -606,3 +617,13 @@ def _error_output(code: int, dialect: Dialect) -> Output:
 
 def _output(data: bytes, droppable: bool = False) -> Output:
     return Output(data, None, droppable=droppable)
+
+
+def _output_beams(output_start: int, output_stop: int, field_start: int, field_stop: int, count: int) -> tuple[int, int]:
+    """The first and last beam within LMPoutputRange, a beam counted in when its angle, in whole ticks
+    as the telegram states it, lies in the range. The beams are (stop − start) / (count − 1) apart, not the
+    rounded resolution (0.3333° is 1/3°: dividing by 3333 ticks put 0° past beam 135, and left it out)."""
+    beams_per_tick = (count - 1) / (field_stop - field_start)
+    first = math.ceil((output_start - field_start - 0.5) * beams_per_tick)
+    last = math.floor((output_stop - field_start + 0.5) * beams_per_tick)
+    return max(0, first), min(count - 1, last)

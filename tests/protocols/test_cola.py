@@ -388,3 +388,41 @@ def test_a_source_that_hands_out_its_freshest_scan_gets_it_stamped_as_itself_and
     assert [(f["scan"], f["transmission_us"]) for f in first] == [(1, round(1e6 / 15))]  # 2 and 3 gave scan 1 again
     later = [decode_scandata(data[8:-1], Dialect.BINARY)["scan"] for data in streamed(dev, 5 / 15 + 1e-6)]
     assert later == [2, 3]
+
+
+@pytest.mark.parametrize("change", [
+    [b"sMN LMCstopmeas", b"sMN LMCstartmeas"],
+    [b"sMN mLMPsetscancfg +5000 +1 +5000 -50000 +1850000"],
+    [b"sWN MSsuppmode 1"],
+    [b"sMN mSCreboot"],
+], ids=["stop-start", "scancfg", "fog-filter", "reboot"])
+def test_a_stream_goes_on_after_the_scans_restart_counting(change):
+    """New settings restart the unit's scan indices; a stream kept the old ones and sent nothing until
+    the new count caught up (as long as the unit had run: 3 s of silence after 3 s of streaming)."""
+    dev, other_port = device(LMS5), None
+    unit = dev.unit
+    dev.receive(b"\x02sEN LMDscandata 1\x03", 0.0)
+    before = [decode_scandata(data[1:-1], Dialect.ASCII)["scan"] for data in streamed(dev, 3.0)]
+    assert before and before[-1] == 75  # 25 Hz
+    other_port = ColaDevice(Source(LMS5), unit)  # the command comes on the unit's other port
+    other_port.receive(b"\x02sMN SetAccessMode 03 F4724744\x03", 3.01)
+    for command in change:
+        other_port.receive(b"\x02" + command + b"\x03", 3.01)
+    period = unit.period_s
+    assert dev.next_deadline() == pytest.approx(3.01 + period)
+    after = [decode_scandata(data[1:-1], Dialect.ASCII)["scan"] for data in streamed(dev, 3.01 + 5 * period + 1e-6)]
+    first = 1 if change == [b"sMN mSCreboot"] else before[-1] + 1  # a reboot counts from 0 again
+    assert after == list(range(first, first + 5))
+
+
+@pytest.mark.parametrize(("start", "stop", "first_angle", "beams"), [
+    (0, 900000, 0, 271), (-140000, 1500000, -140000, 493), (-450000, 2250000, -450000, 811), (1, 3333, 3333, 1),
+])
+def test_the_output_range_keeps_a_beam_lying_on_its_edge_at_a_third_of_a_degree(start, stop, first_angle, beams):
+    """Beams at −45° + k/3°: 0° is beam 135, which a division by the rounded 3333 ticks put out of range."""
+    dev = device()
+    ask(dev, b"sMN SetAccessMode 03 F4724744", 0.0)
+    assert ask(dev, b"sWN LMPoutputRange 1 D05 %+d %+d" % (start, stop), 0.0) == b"\x02sWA LMPoutputRange\x03"
+    fields = decode_scandata(ask(dev, b"sRN LMDscandata", 0.5)[1:-1], Dialect.ASCII)
+    _, _, start_angle, step, values = fields["channels"]["DIST1"]
+    assert (start_angle, step, len(values)) == (first_angle, 3333, beams)
