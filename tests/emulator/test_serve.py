@@ -170,7 +170,7 @@ def test_a_streaming_lms_at_9600_does_not_stall_the_urg(tmp_path: Path) -> None:
         (["railway", "--endpoint", "urg=tcp:127.0.0.1:99999"], "PORT 0..65535"),
         (["railway", "--endpoint", "urg"], "expected SENSOR=URI"),
         (["no-such-scene"], "no-such-scene"),
-        (["railway", "--speed", "0"], "--speed must be > 0"),
+        (["railway", "--speed", "0"], "--speed must be >= 0.001 and <= 1000, got 0"),
         (["railway", "--worker-nice", "20"], "--worker-nice must be 0..19, got 20"),
         (["railway", "--worker-nice", "-1"], "--worker-nice must be 0..19, got -1"),
     ],
