@@ -12,6 +12,7 @@ channels in CoLa-A).
 
 from __future__ import annotations
 
+import re
 import struct
 from dataclasses import dataclass
 
@@ -220,18 +221,21 @@ def _decode_ascii(tokens: list[bytes], kinds: tuple[str, ...]) -> list[object]:
     return values
 
 
+_DECIMAL = re.compile(rb"[+-][0-9]+")  # CoLa-A: a sign makes a number decimal
+_HEX = re.compile(rb"[0-9A-Fa-f]+")
+
+
 def _ascii_number(token: bytes, kind: str) -> int:
     code, signed = SCALARS[kind]
     bits = struct.calcsize(code) * 8
-    try:
-        if token[:1] in (b"+", b"-"):
-            value = int(token, 10)
-        else:
-            value = int(token, 16)
-            if signed and value >= 1 << (bits - 1) and len(token) * 4 >= bits:
-                value -= 1 << bits  # FFF92230: a negative i32 written as its two's complement
-    except ValueError:
-        raise BadArguments(f"not a number: {token[:20]!r}") from None
+    if _DECIMAL.fullmatch(token):
+        value = int(token, 10)
+    elif _HEX.fullmatch(token):
+        value = int(token, 16)
+        if signed and value >= 1 << (bits - 1) and len(token) * 4 >= bits:
+            value -= 1 << bits  # FFF92230: a negative i32 written as its two's complement
+    else:  # Python's int() would also take 1_0, 0x10 and ０ (a full-width digit)
+        raise BadArguments(f"not a number: {token[:20]!r}")
     low, high = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)
     if not low <= value <= high:
         raise BadArguments(f"{value} does not fit a {kind}")

@@ -134,6 +134,8 @@ def test_errors_are_the_units_sfa_codes():
     ask(dev, b"sMN SetAccessMode 03 F4724744")
     assert ask(dev, b"sMN mLMPsetscancfg +1500 +1") == b"\x02sFA 8\x03"  # too few arguments
     assert ask(dev, b"sMN mLMPsetscancfg +15x0 +1 +3333 0 0") == b"\x02sFA 11\x03"
+    for python_only in (b"+1_500", b"0x5DC", b"+\xef\xbc\x91500"):  # int() takes them; the unit's syntax does not
+        assert ask(dev, b"sMN mLMPsetscancfg " + python_only + b" +1 +3333 0 0") == b"\x02sFA 11\x03"
     assert ask(dev, b"sEN LMDscandata 1FF") == b"\x02sFA 10\x03"
     assert ask(dev, b"sMN mLMPsetscancfg +2500 +1 +3333 0 0") == b"\x02sAN mLMPsetscancfg 1 5DC 1 D05 FFF92230 225510\x03"
     assert ask(dev, b"sWN LMDscandatacfg 02 00 1 1 0 00 00 0 0 0 0 +1") == b"\x02sFA 4\x03"  # a TiM has one echo
