@@ -47,10 +47,6 @@ SCAN_CACHE_SIZE = 32  # recent scan requests per sensor; endpoints of one sensor
 # pass whatever the number of instants, so 8 share that floor well, while a
 # stream that stops wastes at most one batch (0.2 s of LMS200 scans).
 SCAN_BATCH = 8
-# While the workers keep up, a scan handed out for a later one (the freshest computed) is at most this
-# old, or two strides of its stream: a poll after a pause read a scan foreseen seconds or minutes
-# before (kept among the last SCAN_CACHE_SIZE), stamped then.
-MAX_STAND_IN_AGE_S = 0.5
 # Two strides are the same stream if they agree this closely: devices ask at
 # index × period, which the µs grid rounds to strides one tick apart.
 STRIDE_TOLERANCE_S = 1e-6
@@ -221,29 +217,18 @@ class ScanCache:
             self.skipped += max(0, round((tick - previous) / (stride * TICKS_PER_S)) - 1)
 
     def _newest_ready(self, shape: RequestKey, tick: int) -> Future | None:
-        """The newest computed scan of this request not after `tick` nor older than a stand-in may be,
-        even one already handed out."""
-        oldest = self._oldest_stand_in(shape, tick)
-        ready = [(key[0], future) for key, future in self._futures.items()
-                 if key[1:] == shape and oldest <= key[0] <= tick and _ready(future)]
+        """The newest computed scan of this request not after `tick`, even one already handed out."""
+        ready = [(key[0], future) for key, future in self._futures.items() if key[1:] == shape and key[0] <= tick and _ready(future)]
         return max(ready, key=lambda pair: pair[0])[1] if ready else None
 
     def _freshest_ready(self, shape: RequestKey, tick: int) -> Future | None:
-        """The newest computed scan of this request after the last one handed out, not after `tick`
-        nor older than a stand-in may be (only a cache that knows the daemon's clock hands one out for
-        a later one: a direct caller always gets the scan it asked for)."""
-        low = max(self._served_tick.get(shape, -1) + 1, self._oldest_stand_in(shape, tick))
+        """The newest computed scan of this request after the last one handed out and not after `tick`
+        (only a cache that knows the daemon's clock hands one out for a later one: a direct caller
+        always gets the scan it asked for)."""
+        served = self._served_tick.get(shape, -1)
         ready = [(key[0], future) for key, future in self._futures.items()
-                 if low <= key[0] <= tick and key[1:] == shape and _ready(future)]
+                 if served < key[0] <= tick and key[1:] == shape and _ready(future)]
         return max(ready, key=lambda pair: pair[0])[1] if ready else None
-
-    def _oldest_stand_in(self, shape: RequestKey, tick: int) -> int:
-        """The oldest tick a scan handed out for `tick` may have: MAX_STAND_IN_AGE_S while the workers
-        keep up; behind, any (the freshest there is beats a wait on the scheduler's turn)."""
-        if self._behind():
-            return -1
-        stride = self._strides.get(shape) or 0.0
-        return tick - round(max(MAX_STAND_IN_AGE_S, 2.0 * stride) * TICKS_PER_S)
 
     def next_scan(self, time_s: float) -> tuple[Future | None, float | None]:
         """What a device due to read the last request's scan at `time_s` must wait for before it is
@@ -257,14 +242,14 @@ class ScanCache:
         shape, tick = _request_key(request), round(time_s * TICKS_PER_S)
         now = self._now() if self._now is not None else None
         limit = tick if now is None else max(tick, round(now * TICKS_PER_S))  # a poll reads the newest due
-        low = max(self._served_tick.get(shape, -1) + 1, self._oldest_stand_in(shape, limit))
+        served = self._served_tick.get(shape, -1)
         # Scans not sent yet, due by `limit` or later. Called on every scan: the ticks are compared first,
         # and only the scans due are checked (each check takes a future's lock), the later ones if needed.
         due: list[tuple[int, Future]] = []
         later: list[tuple[int, Future]] = []
         for key, future in self._futures.items():
             held_tick = key[0]
-            if held_tick >= low and key[1:] == shape:
+            if held_tick > served and key[1:] == shape:
                 (due if held_tick <= limit else later).append((held_tick, future))
         due = [(held_tick, future) for held_tick, future in due if not future.cancelled()]
         if any(future.done() for _, future in due):

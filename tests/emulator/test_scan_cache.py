@@ -275,18 +275,3 @@ def test_after_send_the_next_batch_is_foreseen_at_settle_and_the_stream_is_the_s
         runs[after_send] = (log.jobs, [scan.time_s for scan in served], observed)
     assert runs[True] == runs[False]
     assert [kind for kind, _ in runs[True][0]].count("scans") >= 2
-
-
-def test_a_poll_after_a_pause_gets_its_own_scan_not_one_foreseen_before_the_pause(
-    sensor: LmsSensor, request_keywords: dict[str, Any], scan_thread: ThreadPoolExecutor
-) -> None:
-    """A client polling (CoLa `sRN LMDscandata`) every scan, then pausing 4 s, got a scan foreseen
-    before the pause, 4 s old and stamped so, as if the daemon were behind; it was not."""
-    clock = [0.0]
-    cache = ScanCache(Recording(sensor), scan_thread, now=lambda: clock[0])
-    for index in range(1, 3 * SCAN_BATCH):
-        clock[0] = index * LMS_SCAN_PERIOD_S
-        assert cache(clock[0], **request_keywords).time_s == pytest.approx(clock[0])
-    scan_thread.submit(lambda: None).result()  # the scans foreseen after the last poll are computed
-    clock[0] += 4.0
-    assert cache(clock[0], **request_keywords).time_s == pytest.approx(clock[0])
