@@ -69,6 +69,11 @@ THIN_AT_SPACING_RATIO = 1.5
 # once): a stream waiting for its batch behind a long queue still counts (a fleet starting at 7x
 # what its workers compute lost half its demand within 2 s, and was spaced too little).
 DEMAND_VALID_S = 3.0
+# While the workers keep up, a request read at once (a CoLa poll, a GD) whose own scan is not computed yet
+# is handed a scan foreseen before it only if that one is at most this much older (simulated s): a real
+# unit answers a poll with its latest scan, at most a period old (10 Hz, the slowest model's). Without the
+# bound, a poller that paused got the scan foreseen right after its last poll, seconds to minutes old.
+INPUT_STAND_IN_MAX_AGE_S = 0.1
 
 
 class ScanSource(Protocol):
@@ -148,16 +153,24 @@ class ScanCache:
         self._served_tick: dict[RequestKey, int] = {}  # per request: the newest instant handed out
         self._bound_tick: dict[RequestKey, int] = {}  # per request: the newest instant a job was sent for
         self._spacing: dict[RequestKey, float] = {}  # a stream foreseen every m-th scan (1: every scan)
+        # What `input_scan` chose for a request read at once: (cache key, the scan to hand out, None for
+        # the one asked for); the read that follows takes it as it is, for the spacing may turn between.
+        self._input_choice: tuple[tuple, Future | None] | None = None
 
     def __call__(self, time_s: float, **request: Any) -> Scan:
         """What a device calls: the scan for this request (computed now, alone, if not foreseen)."""
         self._last_request = request
         shape, tick = _request_key(request), round(time_s * TICKS_PER_S)
-        future = self._futures.get(_cache_key(time_s, request))
+        key = _cache_key(time_s, request)
+        future = self._futures.get(key)
         ready = _ready(future)  # (each look at a future takes its lock: once)
-        fresher = None if ready or self._now is None else self._freshest_ready(shape, tick)
-        if fresher is None and not ready and self._now is not None and self._behind():
-            fresher = self._newest_ready(shape, tick)  # a request read at once (`input_scan`): the newest there is
+        choice = self._input_choice
+        if choice is not None and choice[0] == key:  # a request read at once: as `input_scan` chose
+            fresher = None if ready else choice[1]
+        else:
+            fresher = None if ready or self._now is None else self._freshest_ready(shape, tick)
+            if fresher is None and not ready and self._now is not None and self._behind():
+                fresher = self._newest_ready(shape, tick)
         if fresher is not None:  # behind: the freshest scan not yet sent, with its own time (not the one asked)
             self._then(self._follow_stream, time_s, request)
             future = fresher
@@ -221,11 +234,11 @@ class ScanCache:
         ready = [(key[0], future) for key, future in self._futures.items() if key[1:] == shape and key[0] <= tick and _ready(future)]
         return max(ready, key=lambda pair: pair[0])[1] if ready else None
 
-    def _freshest_ready(self, shape: RequestKey, tick: int) -> Future | None:
-        """The newest computed scan of this request after the last one handed out and not after `tick`
-        (only a cache that knows the daemon's clock hands one out for a later one: a direct caller
-        always gets the scan it asked for)."""
-        served = self._served_tick.get(shape, -1)
+    def _freshest_ready(self, shape: RequestKey, tick: int, oldest: int = -1) -> Future | None:
+        """The newest computed scan of this request after the last one handed out (and not before
+        `oldest`) and not after `tick` (only a cache that knows the daemon's clock hands one out for a
+        later one: a direct caller always gets the scan it asked for)."""
+        served = max(self._served_tick.get(shape, -1), oldest - 1)
         ready = [(key[0], future) for key, future in self._futures.items()
                  if served < key[0] <= tick and key[1:] == shape and _ready(future)]
         return max(ready, key=lambda pair: pair[0])[1] if ready else None
@@ -277,10 +290,13 @@ class ScanCache:
             return None
         key = _cache_key(time_s, request)
         future = self._futures.get(key)
-        if _ready(future) or (self._now is not None and self._freshest_ready(key[1:], key[0]) is not None):
+        self._input_choice = (key, None)
+        if _ready(future):
             return None
-        if self._now is not None and self._behind() and self._newest_ready(key[1:], key[0]) is not None:
-            return None  # behind: the newest scan there is answers at once (an LMS200's ACK must not wait)
+        stand_in = self._input_stand_in(key[1:], key[0])
+        if stand_in is not None:
+            self._input_choice = (key, stand_in)
+            return None
         if _held(future) and self._idle():  # under way, or waiting for its quiet moment
             self._start_now(future)
             return future
@@ -288,6 +304,18 @@ class ScanCache:
             future.cancel()  # its batch leaves it out; this job goes first
         self._outdated.pop(key, None)
         return self._submit_one(time_s, request, key, urgency=-math.inf)
+
+    def _input_stand_in(self, shape: RequestKey, tick: int) -> Future | None:
+        """The scan a request read at once gets when its own is not computed: behind, the freshest one
+        not sent yet, else the newest there is (an LMS200's ACK must not wait for a behind fleet's
+        turn); on time, the freshest not sent yet if at most INPUT_STAND_IN_MAX_AGE_S old; else none
+        (it is computed first of all jobs)."""
+        if self._now is None:
+            return None
+        if self._behind():
+            fresher = self._freshest_ready(shape, tick)
+            return fresher if fresher is not None else self._newest_ready(shape, tick)
+        return self._freshest_ready(shape, tick, oldest=tick - round(INPUT_STAND_IN_MAX_AGE_S * TICKS_PER_S))
 
     def _current(self, time_s: float, shape: RequestKey) -> float:
         """The stream's newest instant due by now at or after `time_s` (a behind device's next scan)."""

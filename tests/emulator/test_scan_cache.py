@@ -275,3 +275,30 @@ def test_after_send_the_next_batch_is_foreseen_at_settle_and_the_stream_is_the_s
         runs[after_send] = (log.jobs, [scan.time_s for scan in served], observed)
     assert runs[True] == runs[False]
     assert [kind for kind, _ in runs[True][0]].count("scans") >= 2
+
+
+def test_a_poll_after_a_pause_reads_the_scan_of_now_not_one_foreseen_before_the_pause(
+    scan_thread: ThreadPoolExecutor,
+) -> None:
+    """A 10 Hz poller (each request read at once, as a CoLa `sRN LMDscandata`) has its next polls
+    foreseen; it pauses 4 s and polls again: it gets the scan of the instant it asked for, not the
+    last one foreseen before the pause (it used to, of any age), while the workers keep up."""
+    from tests.emulator.test_overload import RecordingSensor
+
+    clock = {"now": 0.0}
+    sensor = RecordingSensor("tim")
+    cache = ScanCache(sensor, scan_thread, now=lambda: clock["now"])
+
+    def poll(time_s: float) -> Scan:
+        clock["now"] = time_s
+        job = cache.input_scan(time_s)
+        if job is not None:
+            job.result(timeout=10)
+        return cache(time_s)
+
+    for index in range(20):
+        assert poll(index * 0.1).time_s == pytest.approx(index * 0.1)
+    scan_thread.submit(lambda: None).result(timeout=10)  # the foreseen polls are computed
+    foreseen_after = max(sensor.computed)
+    assert foreseen_after > 1.95  # the batch reaches past the last poll: there is a stale scan to hand out
+    assert poll(1.9 + 4.0).time_s == pytest.approx(5.9)

@@ -1,4 +1,5 @@
-"""A reader that stalls and resumes gets fresh scans, not the backlog of its stall.
+"""A reader that stalls and resumes gets fresh scans, not the backlog of its stall; a poller that
+pauses gets the scan of the moment it asks.
 
 Scans written into the kernel's buffers cannot be recalled, so the daemon keeps no
 more than about one scan there ahead of the reader; the rest wait in its outbox,
@@ -16,6 +17,7 @@ import tty
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+from emulator.bench.cola_client import ColaClient, ScanTelegram, parse_scandata
 from emulator.bench.serve_process import ServeProcess
 from protocols.scip.encoding import decode_values
 
@@ -81,3 +83,48 @@ def test_a_pty_reader_resuming_after_a_stall_gets_fresh_scans(tmp_path: Path) ->
         finally:
             os.close(fd)
     assert len(stale) <= MOST_STALE_SCANS, f"{len(stale)} stale scans (ms after the stall began): {stale}"
+
+
+POLLER_SCENE = """
+[scene]
+name = "poller"
+[[objects]]
+name = "wall"
+box = { size = [0.2, 30.0, 3.0] }
+position = [3.6, 0.0, 1.0]
+[[sensors]]
+name = "tim"
+model = "tim561"
+position = [0.0, 0.0, 0.4]
+endpoints = ["tcp:127.0.0.1:0"]
+"""
+POLLER_SPEED = 10  # simulated seconds a wall second: a pause of 0.4 s is 4 s of the unit's time
+POLLS = 20
+POLL_GAP_S = 0.01  # wall: 0.1 s of the unit's time, as a 10 Hz poller
+PAUSE_S = 0.4  # wall: 4 s of the unit's time
+
+
+def test_a_cola_poller_after_a_pause_gets_the_scan_of_now(tmp_path: Path) -> None:
+    """A client polling `sRN LMDscandata` that pauses, then polls again, gets the scan measured
+    when it asked, as a unit answers: it used to get the scan foreseen right after its last
+    poll, seconds to minutes old (4 s, 67 s, 741 s seen), with that scan's stamp and counter."""
+    scene = tmp_path / "poller.toml"
+    scene.write_text(POLLER_SCENE)
+    with ServeProcess(scene, (), extra_args=["--speed", str(POLLER_SPEED)]) as daemon:
+        host, port = daemon.endpoint("tim", "tcp").address
+        with ColaClient(host, port) as client:
+            def poll() -> ScanTelegram:
+                client.send(b"sRN LMDscandata")
+                telegram, received = client.next_telegram()
+                return parse_scandata(telegram.payload, telegram.dialect, received)
+
+            for _ in range(POLLS):
+                before = poll()
+                time.sleep(POLL_GAP_S)
+            time.sleep(PAUSE_S)
+            after = poll()
+    unit_pause_s = (after.power_up_us - before.power_up_us) / 1e6
+    # the pause in the unit's time, less the daemon's own reply latency; a scan foreseen after the
+    # last poll is at most a batch of 8 polls (0.8 s) after it
+    assert unit_pause_s >= PAUSE_S * POLLER_SPEED, f"the scan after a {PAUSE_S * POLLER_SPEED:g} s pause is {unit_pause_s:g} s after the last"
+    assert after.scan_counter - before.scan_counter >= PAUSE_S * POLLER_SPEED * 15  # a TiM561 measures at 15 Hz
