@@ -167,7 +167,9 @@ class PtyEndpoint(ClientSlot):
         self._watch_for_client()
 
     def _discard_queued_bytes(self) -> None:
-        """Bytes still in the pty would reach the next client: flush them from the slave side."""
+        """Bytes still in the pty for the old client would reach the next one: flush them from the
+        slave side. Only those (the slave's input): a next client may already have opened it and
+        written its first command, which must reach the device (a driver restarted at once lost it)."""
         try:
             slave = os.open(self.slave_name, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
         except OSError as error:
@@ -175,6 +177,6 @@ class PtyEndpoint(ClientSlot):
                 return
             raise
         try:
-            termios.tcflush(slave, termios.TCIOFLUSH)
+            termios.tcflush(slave, termios.TCIFLUSH)
         finally:
             os.close(slave)

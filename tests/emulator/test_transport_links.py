@@ -338,6 +338,38 @@ def test_pty_client_leaving_resets_the_session_once_and_the_next_starts_clean(
     assert device.lost == 2
 
 
+def test_a_pty_client_opening_as_the_last_one_leaves_keeps_what_it_writes(
+    loop_thread: LoopThread, tmp_path: Path
+) -> None:
+    """A driver restarted at once (killed mid-stream, then started again) opens the pty and writes its
+    first command while the daemon is still handling the old client's departure: the stale scans for
+    the old client are discarded, the new client's command is not (it was, 1 run in ~100 under load,
+    and MRPT's CHokuyoURG then got no reply to its first QT)."""
+    device = LineDevice()
+    served = serve(loop_thread, device, "pty", tmp_path)
+    first = Client("pty", served.target)
+    first.write(b"stream 500 5\n")
+    assert first.read_exactly(2000, timeout=2)
+    time.sleep(0.1)  # stops reading: messages wait in the pty when it closes
+    endpoint = served.endpoint
+    disconnect = endpoint._disconnect
+    second: list[int] = []
+
+    def the_next_client_arrives_meanwhile() -> None:
+        if not second:  # the moment the old client's departure is handled
+            second.append(os.open(served.target, os.O_RDWR | os.O_NOCTTY))
+            os.write(second[0], b"echo first command\n")
+        disconnect()
+
+    endpoint._disconnect = the_next_client_arrives_meanwhile  # type: ignore[method-assign]
+    first.close()
+    assert wait_for(lambda: device.lost == 1)
+    assert wait_for(lambda: b"echo first command" in device.lines), device.lines[-3:]
+    assert select.select([second[0]], [], [], 2)[0]
+    assert os.read(second[0], 65536) == b"first command\n", "stale bytes from the last client"
+    os.close(second[0])
+
+
 def test_pty_symlink_is_created_and_removed_on_close(loop_thread: LoopThread, tmp_path: Path) -> None:
     link = tmp_path / "tty0"
     served = serve(loop_thread, LineDevice(), "pty", tmp_path)
