@@ -21,12 +21,15 @@ class Output:
     output has not gone out yet (a host command interrupts the LMS200's
     streaming). `droppable`: a streamed scan, which a transport whose client
     is not reading may drop whole; replies to commands are never dropped.
+    `hang_up`: the unit drops the connection once the output before this one
+    has gone (a reboot); a transport that cannot (a pty) keeps it.
     """
 
     data: bytes
     baud: int | None = None
     interrupt: bool = False
     droppable: bool = False
+    hang_up: bool = False
 
 
 class Device(Protocol):

@@ -62,6 +62,8 @@ class Link:
     the outbox holds, the client is not read until it has taken enough of them: its bytes wait in
     the kernel (TCP's window, the tty's buffer) and its writes block, as a device's flow control
     makes them; none is lost, and what the daemon holds stays bounded.
+    An output that hangs up (a reboot) calls `on_hang_up` once everything before it has been
+    written, if the transport can drop its client (TCP); nothing after it is sent.
     """
 
     def __init__(
@@ -76,8 +78,11 @@ class Link:
         accepts_input: Callable[[], bool] = lambda: True,
         limit_bytes: int = DEFAULT_LIMIT_BYTES,
         kernel_backlog: Callable[[], int] | None = None,
+        on_hang_up: Callable[[], None] | None = None,
     ) -> None:
         self.outbox = Outbox(limit_bytes, kernel_backlog)
+        self._on_hang_up = on_hang_up
+        self._hanging_up = False  # the device hung up: drop the client once the outbox is empty
         self.discarded_input = 0  # bytes dropped: a pty client at the wrong baud
         self._stalled = False  # input waits until the client has read the replies piled up
         self._loop = loop
@@ -106,9 +111,14 @@ class Link:
         return self._loop.time() - self.last_activity
 
     def send(self, outputs: list[Output]) -> None:
-        if not self._open:
+        if not self._open or self._hanging_up:
             return
         for output in outputs:
+            if output.hang_up:
+                self._hanging_up = self._on_hang_up is not None
+                if self._hanging_up:
+                    break  # nothing after it reaches this client
+                continue
             self.outbox.put(output)
         if self.outbox.holding and self._pace_timer is not None:
             # the held output may now be replaced by these: look again at once, not on the timer
@@ -201,6 +211,10 @@ class Link:
         while True:
             data, wake_at = self.outbox.chunk(now)
             if not data:
+                if wake_at is None and self._hanging_up and self._on_hang_up is not None:
+                    self.close()
+                    self._on_hang_up()
+                    return
                 if wake_at is not None:
                     # the precise timer: asyncio's fires 0.2-3.5 ms late, which moved the end of
                     # each paced telegram by as much (LMS200 period deviation p99 ≈ 3.6 ms)
@@ -261,6 +275,7 @@ class ClientSlot:
         on_lost: Callable[[], None],
         accepts_input: Callable[[], bool] = lambda: True,
         kernel_backlog: Callable[[], int] | None = None,
+        on_hang_up: Callable[[], None] | None = None,
     ) -> None:
         """A client arrived on `fd`: link it to the session."""
         self.clients_served += 1
@@ -274,6 +289,7 @@ class ClientSlot:
             accepts_input=accepts_input,
             limit_bytes=self._limit_bytes,
             kernel_backlog=kernel_backlog,
+            on_hang_up=on_hang_up,
         )
 
     def _disconnect(self) -> None:

@@ -108,6 +108,7 @@ class TcpEndpoint(ClientSlot):
             write=client.send,
             kernel_backlog=lambda: unsent_bytes(client.fileno()),
             on_lost=self._client_left,
+            on_hang_up=self._client_left,
         )
 
     def _client_still_there(self) -> bool:

@@ -57,6 +57,13 @@ PARAMETER_CHARS = {
 ADJUST_MODE_COMMANDS = frozenset({b"TM", b"RS", b"RT", b"RB", b"VV", b"PP", b"II", b"%ST"})
 DEFAULT_BIT_RATE = 115200
 REBOOT_CONFIRM_S = 1.0  # RB reboots when a second RB follows the first within a second
+# After the second RB's 00 the unit "waits for 1 second, during this time the host system disconnects
+# from the sensor", then stops all communication (the SCIP 2.2 specification, as hokuyolx quotes it):
+# it drops the connection, its timer restarts from zero, and it boots with its power-on settings
+# (urg_stamped's urg_sim, written against real units). Commands that arrive while it boots are
+# answered once it is up.
+REBOOT_DELAY_S = 1.0
+BOOT_S = 1.0
 # %ST: the state codes of the UST protocol (standby, time adjustment, single scan, multi scan, sleep)
 STANDBY, TIME_ADJUSTMENT, SINGLE_SCAN_STATE, MULTI_SCAN_STATE, SLEEP = b"000", b"002", b"003", b"004", b"005"
 
@@ -148,6 +155,8 @@ class Scip22Device(StreamingDevice):
         self._asleep = False
         self._stream = None
         self._reboot_asked: float | None = None  # when the first RB came
+        self._reboot_at: float | None = None  # a confirmed RB: when the unit goes down
+        self._booting_until = -math.inf  # the unit is down and booting until then
         self._bit_rate = DEFAULT_BIT_RATE  # a USB unit's SS setting: reported, never pacing the link
 
     # --- protocols.device.Device -------------------------------------------
@@ -159,8 +168,9 @@ class Scip22Device(StreamingDevice):
 
     def receive(self, data: bytes, now: float) -> list[Output]:
         outputs = self.poll(now)
+        booting = self.booting(now)
         for line in self._lines.feed(data):
-            if self._pending is None:
+            if self._pending is None and not booting:
                 reply = self._reply(line, now)
                 if isinstance(reply, _Pending):
                     self._pending = reply
@@ -174,22 +184,40 @@ class Scip22Device(StreamingDevice):
 
     def poll(self, now: float) -> list[Output]:
         """Replies and streamed scans whose data have left by `now`, in time order; the commands
-        that waited behind a reply run when it leaves, at its time."""
+        that waited behind a reply run when it leaves, at its time (those that came while the unit
+        booted, once it is up). A confirmed reboot hangs up once what was due before it has gone."""
+        if self._reboot_at is not None and now >= self._reboot_at - EPSILON_S:
+            before = self._poll_until(self._reboot_at)
+            self._go_down(self._reboot_at)
+            return before + [Output(b"", hang_up=True)] + self._poll_until(now)
+        return self._poll_until(now)
+
+    def _poll_until(self, now: float) -> list[Output]:
         outputs: list[tuple[float, int, Output]] = []
+        if self._waiting and self._pending is None and not self.booting(now):
+            self._run_waiting(self._booting_until, outputs)  # held while the unit booted
         while self._pending is not None and self._pending.due <= now + EPSILON_S:
             item, self._pending = self._pending, None
             outputs.append((item.due, len(outputs), Output(item.build())))
-            while self._waiting and self._pending is None:
-                reply = self._reply(self._waiting.popleft(), item.due)
-                if isinstance(reply, _Pending):
-                    self._pending = reply
-                else:
-                    outputs.append((item.due, len(outputs), Output(reply)))
+            self._run_waiting(item.due, outputs)
         outputs += [(due, len(outputs) + i, output) for i, (due, output) in enumerate(self._stream_until(now))]
         return [output for _, _, output in sorted(outputs, key=lambda entry: entry[:2])]
 
+    def _run_waiting(self, at: float, outputs: list[tuple[float, int, Output]]) -> None:
+        """Answer the commands that waited, at `at`, until one of them waits for its scan."""
+        while self._waiting and self._pending is None:
+            reply = self._reply(self._waiting.popleft(), at)
+            if isinstance(reply, _Pending):
+                self._pending = reply
+            else:
+                outputs.append((at, len(outputs), Output(reply)))
+
     def next_deadline(self) -> float | None:
         deadlines = [self._pending.due] if self._pending is not None else []
+        if self._reboot_at is not None:
+            deadlines.append(self._reboot_at)
+        if self._waiting and self._pending is None:
+            deadlines.append(self._booting_until)  # commands held while the unit boots
         if self._stream is not None:
             deadlines.append(self._departure(self._stream.next_index, self._stream.request))
         return min(deadlines, default=None)
@@ -210,6 +238,20 @@ class Scip22Device(StreamingDevice):
         """The period of the stream running (None: none runs), so a daemon can batch it from its first scans."""
         stream = self._stream
         return None if stream is None else (stream.request.interval + 1) * self.profile.period_ms / 1000
+
+    def booting(self, now: float) -> bool:
+        """Whether the unit is booting after a reboot (commands wait until it is up)."""
+        return now < self._booting_until - EPSILON_S
+
+    def _go_down(self, at: float) -> None:
+        """The confirmed reboot: communication stops, the timer restarts, and the unit boots with its
+        power-on settings."""
+        self._reboot_at = None
+        self._booting_until = at + BOOT_S
+        self.connection_lost()
+        self._laser_on, self._asleep, self._last_single_scan = False, False, -1
+        self._bit_rate = DEFAULT_BIT_RATE
+        self._epoch_ms = milliseconds(at)
 
     def connection_lost(self) -> None:
         """Streaming stops and unanswered commands are forgotten; the unit keeps its timer."""
@@ -283,8 +325,7 @@ class Scip22Device(StreamingDevice):
                 self._reboot_asked = now
                 return frame(echo, b"01")
             self._reboot_asked = None
-            self._stream, self._laser_on, self._adjust_mode, self._asleep = None, False, False, False
-            self._epoch_ms = milliseconds(now)
+            self._reboot_at = now + REBOOT_DELAY_S
             return frame(echo, b"00")
         if code == b"QT":
             self._stream, self._laser_on = None, False

@@ -74,6 +74,8 @@ class LineDevice:
             return []
         if word == b"stop":
             self._stream = None
+        if word == b"hangup":  # a burst, a hang-up, then a word no client of a hung-up link reads
+            return [Output(b"x" * int(rest), baud=self._baud), Output(b"", hang_up=True), Output(b"after\n")]
         return []
 
     def poll(self, now: float) -> list[Output]:
@@ -237,6 +239,31 @@ def test_echo_round_trip(loop_thread: LoopThread, tmp_path: Path, kind: str) -> 
     client = Client(kind, served.target)
     client.write(b"echo hello\n")
     assert client.read_exactly(6, timeout=2) == b"hello\n"
+    client.close()
+
+
+@pytest.mark.parametrize("kind", TRANSPORTS)
+def test_a_hang_up_drops_a_tcp_client_after_what_came_before_and_a_pty_keeps_its_client(
+    loop_thread: LoopThread, tmp_path: Path, kind: str
+) -> None:
+    """A device that hangs up (a rebooting unit): a TCP client gets everything sent before it, then the
+    end of the stream, and the session is told once; a pty cannot drop its client, which reads on."""
+    device = LineDevice()
+    served = serve(loop_thread, device, kind, tmp_path)
+    client = Client(kind, served.target)
+    client.write(b"hangup 200000\n")  # more than the socket takes at once: the hang-up waits for the rest
+    assert client.read_exactly(200000, timeout=5) == b"x" * 200000
+    if kind == "tcp":
+        with pytest.raises(EOFError):
+            client.read_for(2.0)
+        assert wait_for(lambda: device.lost == 1 and not served.endpoint.connected)
+        again = Client(kind, served.target)  # the endpoint takes the next client
+        again.write(b"echo back\n")
+        assert again.read_exactly(5, timeout=2) == b"back\n"
+        again.close()
+    else:
+        assert client.read_exactly(6, timeout=2) == b"after\n"
+        assert device.lost == 0 and served.endpoint.connected
     client.close()
 
 

@@ -133,3 +133,33 @@ def test_multi_echo_with_intensity_under_physical(serve, ust_room: Path, tcp_por
         count = max(1, int((scan.echoes[step] >= 0).sum()))
         assert echoes == [(int(scan.echoes[step, k]), int(scan.echo_intensities[step, k])) for k in range(count)], step
     assert sum(len(echoes) > 1 for echoes in steps) >= 1
+
+
+def test_ust_reboot_drops_the_connection_and_a_reconnect_finds_the_unit_booted(serve, ust_room: Path, tcp_port: int) -> None:
+    """hokuyolx's `reboot()` (RB twice: 01, then 00) on the real daemon: a second later the unit drops
+    the connection, as the specification says; hokuyolx reconnecting then finds it booted, with the
+    laser off and its timer restarted."""
+    daemon = serve(ust_room, f"ust=tcp:127.0.0.1:{tcp_port}")
+    address = daemon.endpoint("ust", "tcp").address
+    client = HokuyoLX(addr=address, tsync=False, convert_time=False)  # it switches the laser on
+    try:
+        assert client.laser_state()[0] == 3
+        before_ms, before_s = client.get_dist()[0], time.monotonic()
+        client.reboot()
+        rebooted_at = time.monotonic()
+        client._sock.settimeout(5.0)
+        assert client._sock.recv(1) == b"", "the unit did not drop the connection"
+        dropped_after = time.monotonic() - rebooted_at
+    finally:
+        client.close()
+    assert 0.8 <= dropped_after <= 2.5, dropped_after  # it waits a second for the host to disconnect
+    again = HokuyoLX(addr=address, activate=False, tsync=False, convert_time=False)  # answered once it has booted
+    try:
+        assert again.laser_state()[0] == 0  # booted with its power-on settings: laser off
+        again.activate()
+        stamp_ms, ranges = again.get_dist()
+        unrestarted_ms = before_ms + (time.monotonic() - before_s) * 1000  # what the old timer would read
+        assert ranges.shape == (STEPS,)
+        assert stamp_ms < unrestarted_ms - 1000, (stamp_ms, unrestarted_ms)  # restarted at the reboot, 1 s after RB
+    finally:
+        again.close()

@@ -200,6 +200,33 @@ def test_rb_reboots_on_the_second_request_within_a_second():
     assert answer(device, b"RB", now=1.6) == b"RB\n01Q\n\n"
 
 
+def test_a_confirmed_rb_hangs_up_a_second_later_and_the_unit_boots_with_its_timer_from_zero():
+    """The unit waits a second for the host to disconnect, then drops the connection (after the scans
+    due before), boots with the laser off and its timer restarted, and answers what came meanwhile
+    once it is up (urg_sim's reboot, written against real units)."""
+    from protocols.scip.scip22 import BOOT_S, REBOOT_DELAY_S
+
+    device = Scip22Device(flat(), "ust-10lx")
+    assert answer(device, b"BM", now=0.5) == b"BM\n00P\n\n"
+    device.receive(b"MD0000108000000\n", now=0.6)  # streaming until the reboot
+    assert answer(device, b"RB", now=1.0) == b"RB\n01Q\n\n"
+    assert answer(device, b"RB", now=1.5) == b"RB\n00P\n\n"
+    reboot_s = 1.5 + REBOOT_DELAY_S
+    assert device.next_deadline() <= reboot_s
+    before = device.poll(reboot_s - 0.01)
+    assert before and all(not output.hang_up for output in before)  # the stream goes on meanwhile
+    down = device.poll(reboot_s + 0.01)
+    assert [output.hang_up for output in down][-1:] == [True] and sum(output.hang_up for output in down) == 1
+    assert not device.laser_on and device.scan_stride_s() is None  # laser off, no stream
+    assert device.booting(reboot_s + 0.5) and not device.booting(reboot_s + BOOT_S + 0.01)
+    assert device.receive(b"TM1\n", now=reboot_s + 0.5) == []  # booting: answered once it is up
+    assert device.next_deadline() == pytest.approx(reboot_s + BOOT_S)
+    (reply,) = device.poll(reboot_s + BOOT_S)
+    assert reply.data.startswith(b"TM1\n00P\n")
+    assert decode(reply.data.split(b"\n")[2][:4]) == round(BOOT_S * 1000)  # the timer restarted at the reboot
+    assert answer(device, b"BM", now=reboot_s + BOOT_S + 0.1) == b"BM\n00P\n\n"  # the laser was off
+
+
 def test_ust_state_query():
     device = Scip22Device(flat(), "ust-10lx")
     assert answer(device, b"%ST") == b"%ST\n00P\n000@\n\n"
@@ -378,7 +405,7 @@ def test_arbitrary_bytes_get_one_well_formed_reply_per_line(model, parts, cuts):
     for a, b in zip([0, *points], [*points, len(stream)]):
         outputs += device.receive(stream[a:b], 1.0)
     outputs += device.poll(10.0)
-    replies = [o.data for o in outputs if not o.droppable]
+    replies = [o.data for o in outputs if not o.droppable and not o.hang_up]  # a reboot's hang-up is no message
     assert len(replies) + device.lost_commands == len(lines)
     echoed = lines if device.lost_commands == 0 else [reply.split(b"\n")[0] for reply in replies]
     for reply, line in zip(replies, echoed):
