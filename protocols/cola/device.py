@@ -142,6 +142,7 @@ class ColaUnit:
         self._epoch_s = power_on_s  # scans complete at epoch + k · period since the last change
         self._scans_before_epoch = 0
         self.epoch = 0  # counts the changes: a stream's scan indices are those of one epoch
+        self.boots = 0  # counts the reboots: each drops the connections of both ports
 
     def _factory(self) -> Settings:
         model = self.model
@@ -182,6 +183,7 @@ class ColaUnit:
         self.power_on_s = self._epoch_s = now
         self._scans_before_epoch = 0
         self.epoch += 1
+        self.boots += 1
         self.telegram_counter = 0
 
     def load_defaults(self, now: float) -> None:
@@ -227,6 +229,7 @@ class ColaDevice:
         prepare_tables()  # not at the first scan's deadline
         self._reader = ColaReader()
         self._session = _Session()
+        self._boots_seen: int | None = None  # the unit's reboots when this port's client first spoke
         self._handlers: dict[tuple[bytes, bytes], tuple[bytes, Handler]] = {
             (b"sMN", b"SetAccessMode"): (b"sAN", self._set_access_mode),
             (b"sMN", b"Run"): (b"sAN", self._run),
@@ -279,14 +282,35 @@ class ColaDevice:
         """Streamed scans due, then the answer to every whole telegram in `data`, in order, as one
         output (a flood of thousands of requests is one write, not thousands)."""
         outputs = self.poll(now)
-        answers = [self._answer(telegram, now).data for telegram in self._reader.feed(data)]
+        if outputs and outputs[-1].hang_up:
+            return outputs
+        if self._boots_seen is None:
+            self._boots_seen = self.unit.boots
+        answers = []
+        for telegram in self._reader.feed(data):
+            answers.append(self._answer(telegram, now).data)
+            if self._rebooted():
+                break  # nothing after the reboot's answer is read
         if answers:
             outputs.append(_output(b"".join(answers)))
-        return outputs
+        return outputs + self._hang_up_if_rebooted()
+
+    def _rebooted(self) -> bool:
+        """Whether the unit rebooted (from either port) since this port's client first spoke."""
+        return self._boots_seen is not None and self._boots_seen != self.unit.boots
+
+    def _hang_up_if_rebooted(self) -> list[Output]:
+        """A reboot drops the connection (after the answer to `mSCreboot`), as the unit's network restarts."""
+        if not self._rebooted():
+            return []
+        self.connection_lost()
+        return [Output(b"", hang_up=True)]
 
     def poll(self, now: float) -> list[Output]:
         """The scans measured since the last one sent, each in its own telegram (a late wake-up sends the
         ones it missed over the last CATCH_UP_S; of a longer gap, those)."""
+        if self._rebooted():
+            return self._hang_up_if_rebooted()
         stream = self._session.stream
         unit = self.unit
         if stream is None or not unit.settings.measuring:
@@ -336,6 +360,7 @@ class ColaDevice:
         """The client went away: streaming to it stops and its login ends; the unit's settings stay."""
         self._reader.clear()
         self._session = _Session()
+        self._boots_seen = None
 
     # -- answering ----------------------------------------------------------
 
@@ -435,8 +460,7 @@ class ColaDevice:
         if denied is not None:
             return denied
         self.unit.reboot(now)
-        self._session = _Session()
-        return []
+        return []  # answered, then the connection drops (`receive`)
 
     def _load_defaults(self, arguments: bytes, dialect: Dialect, now: float) -> list[Value] | int:
         denied = self._method(now)

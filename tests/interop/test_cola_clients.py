@@ -103,6 +103,30 @@ def test_settings_are_one_across_the_units_endpoints_and_outlive_connections(ser
         assert scan.channels == ["DIST1", "DIST2", "RSSI1", "RSSI2"] and len(scan.distances) == 1081
 
 
+def test_a_reboot_drops_both_endpoints_clients_and_the_unit_serves_the_next_ones(serve, tmp_path: Path) -> None:
+    """`mSCreboot` on one endpoint: its answer, then the unit closes that connection and the other
+    endpoint's streaming one, as a real unit's network restarts; clients connecting afterwards are
+    served, the saved settings restored and the scan counter from 1."""
+    daemon = serve(_room(tmp_path, "lms111"))
+    first, second = [ready.address for ready in daemon.ready if ready.sensor == "sick"]
+    with ColaClient(*first, Dialect.ASCII) as streaming, ColaClient(*second, Dialect.ASCII) as rebooting:
+        assert streaming.ask(b"sEN LMDscandata 1") == b"sEA LMDscandata 1"
+        while (before := streaming.scan().scan_counter) < 30:
+            pass
+        assert rebooting.ask(b"sMN SetAccessMode 03 F4724744") == b"sAN SetAccessMode 1"
+        assert rebooting.ask(b"sMN mSCreboot") == b"sAN mSCreboot"
+        with pytest.raises(ConnectionError):
+            rebooting.next_telegram(timeout_s=3.0)
+        with pytest.raises(ConnectionError):
+            while True:
+                streaming.scan(timeout_s=3.0)
+    with ColaClient(*first, Dialect.ASCII) as client:
+        client.send(b"sRN LMDscandata")
+        scan = client.scan()
+        assert scan.scan_counter < before  # counted again from the reboot
+        assert client.ask(b"sRN LMPscancfg").startswith(b"sRA LMPscancfg ")
+
+
 def test_the_control_api_serves_a_cola_sensors_scans_as_its_clients_get_them(serve, tmp_path: Path) -> None:
     scene = _room(tmp_path, "tim571")
     daemon = serve(scene)

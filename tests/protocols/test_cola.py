@@ -396,8 +396,7 @@ def test_a_source_that_hands_out_its_freshest_scan_gets_it_stamped_as_itself_and
     [b"sMN LMCstopmeas", b"sMN LMCstartmeas"],
     [b"sMN mLMPsetscancfg +5000 +1 +5000 -50000 +1850000"],
     [b"sWN MSsuppmode 1"],
-    [b"sMN mSCreboot"],
-], ids=["stop-start", "scancfg", "fog-filter", "reboot"])
+], ids=["stop-start", "scancfg", "fog-filter"])
 def test_a_stream_goes_on_after_the_scans_restart_counting(change):
     """New settings restart the unit's scan indices; a stream kept the old ones and sent nothing until
     the new count caught up (as long as the unit had run: 3 s of silence after 3 s of streaming)."""
@@ -413,8 +412,28 @@ def test_a_stream_goes_on_after_the_scans_restart_counting(change):
     period = unit.period_s
     assert dev.next_deadline() == pytest.approx(3.01 + period)
     after = [decode_scandata(data[1:-1], Dialect.ASCII)["scan"] for data in streamed(dev, 3.01 + 5 * period + 1e-6)]
-    first = 1 if change == [b"sMN mSCreboot"] else before[-1] + 1  # a reboot counts from 0 again
-    assert after == list(range(first, first + 5))
+    assert after == list(range(before[-1] + 1, before[-1] + 6))
+
+
+def test_a_reboot_drops_both_ports_connections_after_its_answer_and_the_next_clients_count_from_one():
+    """`mSCreboot` from one port: its answer, then the connection drops (nothing after it in the same read
+    is answered); the other port's streaming client is dropped at its next scan; a client connecting
+    after the reboot is served, its stream's scans counting from 1 (a real unit's network restarts)."""
+    dev = device(LMS5)
+    unit = dev.unit
+    dev.receive(b"\x02sEN LMDscandata 1\x03", 0.0)
+    assert streamed(dev, 1.0)
+    other_port = ColaDevice(Source(LMS5), unit)
+    other_port.receive(b"\x02sMN SetAccessMode 03 F4724744\x03", 1.01)
+    outputs = other_port.receive(b"\x02sMN mSCreboot\x03\x02sRN LMPscancfg\x03", 1.01)
+    assert [(o.data, o.hang_up) for o in outputs] == [(b"\x02sAN mSCreboot\x03", False), (b"", True)]
+    assert [o.hang_up for o in dev.poll(1.01 + unit.period_s)] == [True]  # no scan after the reboot
+    dev.connection_lost()  # the transport hung up: its session ends
+    other_port.connection_lost()
+    assert ask(other_port, b"sRN LMPscancfg", 1.5).startswith(b"\x02sRA LMPscancfg ")  # a new client: served
+    dev.receive(b"\x02sEN LMDscandata 1\x03", 1.5)
+    after = [decode_scandata(data[1:-1], Dialect.ASCII)["scan"] for data in streamed(dev, 1.5 + 3 * unit.period_s)]
+    assert after[-3:] == [(1.5 - 1.01) // unit.period_s + k for k in (1, 2, 3)]  # counted from the reboot
 
 
 @pytest.mark.parametrize(("start", "stop", "first_angle", "beams"), [
