@@ -165,9 +165,9 @@ class ScanCache:
         future = self._futures.get(key)
         ready = _ready(future)  # (each look at a future takes its lock: once)
         choice = self._input_choice
-        if choice is not None and choice[0] == key:  # a request read at once: as `input_scan` chose
-            fresher = None if ready else choice[1]
-        else:
+        if choice is not None and choice[0] == key and (ready or _ready(choice[1])):
+            fresher = None if ready else choice[1]  # a request read at once: as `input_scan` chose
+        else:  # (a choice a live change has since undone is not waited on: chosen again)
             fresher = None if ready or self._now is None else self._freshest_ready(shape, tick)
             if fresher is None and not ready and self._now is not None and self._behind():
                 fresher = self._newest_ready(shape, tick)
