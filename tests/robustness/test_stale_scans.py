@@ -20,6 +20,7 @@ from pathlib import Path
 from emulator.bench.cola_client import ColaClient, ScanTelegram, parse_scandata
 from emulator.bench.serve_process import ServeProcess
 from protocols.scip.encoding import decode_values
+from tests.support.interop import write_room
 
 STALL_S = 5.0
 STREAM = b"MD0044072501000\n"  # URG-04LX: every scan, all 682 steps, until QT
@@ -85,19 +86,6 @@ def test_a_pty_reader_resuming_after_a_stall_gets_fresh_scans(tmp_path: Path) ->
     assert len(stale) <= MOST_STALE_SCANS, f"{len(stale)} stale scans (ms after the stall began): {stale}"
 
 
-POLLER_SCENE = """
-[scene]
-name = "poller"
-[[objects]]
-name = "wall"
-box = { size = [0.2, 30.0, 3.0] }
-position = [3.6, 0.0, 1.0]
-[[sensors]]
-name = "tim"
-model = "tim561"
-position = [0.0, 0.0, 0.4]
-endpoints = ["tcp:127.0.0.1:0"]
-"""
 POLLER_SPEED = 10  # simulated seconds a wall second: a pause of 0.4 s is 4 s of the unit's time
 POLLS = 20
 POLL_GAP_S = 0.01  # wall: 0.1 s of the unit's time, as a 10 Hz poller
@@ -108,9 +96,7 @@ def test_a_cola_poller_after_a_pause_gets_the_scan_of_now(tmp_path: Path) -> Non
     """A client polling `sRN LMDscandata` that pauses, then polls again, gets the scan measured
     when it asked, as a unit answers: it used to get the scan foreseen right after its last
     poll, seconds to minutes old (4 s, 67 s, 741 s seen), with that scan's stamp and counter."""
-    scene = tmp_path / "poller.toml"
-    scene.write_text(POLLER_SCENE)
-    with ServeProcess(scene, (), extra_args=["--speed", str(POLLER_SPEED)]) as daemon:
+    with ServeProcess(write_room(tmp_path, "tim"), (), extra_args=["--speed", str(POLLER_SPEED)]) as daemon:
         host, port = daemon.endpoint("tim", "tcp").address
         with ColaClient(host, port) as client:
             def poll() -> ScanTelegram:

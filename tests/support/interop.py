@@ -90,6 +90,13 @@ model = "utm-30lx-ew"
 position = [0.0, 0.0, 0.3]
 endpoints = ["pty:{folder}/scene-ttyUTM"]
 """,
+    "tim": """
+[[sensors]]
+name = "tim"
+model = "tim561"
+position = [0.0, 0.0, 0.4]
+endpoints = ["tcp:127.0.0.1:0"]
+""",
     "utm-usb": """
 [[sensors]]
 name = "utm"
