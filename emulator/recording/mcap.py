@@ -4,8 +4,8 @@ Channels (Foxglove's well-known schemas, protobuf-encoded by foxglove-sdk):
 
 | topic | schema | what |
 |---|---|---|
-| `/SENSOR/scan` | `foxglove.LaserScan` | each scan's measured beams (`sensors/published.py`) in metres, frame `SENSOR`; error codes as ±inf / NaN (`laserscan.py`) |
-| `/SENSOR/values` | `lrf.DeviceValues` (JSON) | the same beams' values exactly as on the wire, unit and codes included |
+| `/SENSOR/scan` | `foxglove.LaserScan` | each scan's measured beams (`sensors/published.py`) in metres, frame `SENSOR`; error codes as ±inf / NaN (`laserscan.py`); the intensities of a model that reports them |
+| `/SENSOR/values` | `lrf.DeviceValues` (JSON) | the same beams' values exactly as on the wire, unit and codes included; intensities and every echo where the model reports them |
 | `/tf` | `foxglove.FrameTransforms` | `world` → each sensor (and body) at the scan's instant |
 | `/scene` | `foxglove.SceneUpdate` | entity `solids` (once), `smoke` (regions, opacity from density) and `plumes` (particles) |
 
@@ -72,6 +72,10 @@ DEVICE_VALUES_SCHEMA = foxglove.Schema(
                 "unit": {"type": "string"},
                 "angles_rad": {"type": "array", "items": {"type": "number"}},
                 "values": {"type": "array", "items": {"type": "integer"}},
+                "intensities": {"type": "array", "items": {"type": "integer"}},
+                "echoes": {"type": "array", "description": "per beam, every echo nearest first, -1 past its last",
+                           "items": {"type": "array", "items": {"type": "integer"}}},
+                "echo_intensities": {"type": "array", "items": {"type": "array", "items": {"type": "integer"}}},
             },
         }
     ).encode(),
@@ -99,9 +103,10 @@ def laser_scan(scan: Scan) -> LaserScan:
     are)."""
     angles = np.asarray(scan.angles_rad, dtype=float)
     ranges = values_to_ranges(scan.values, scan.model, scan.unit)
+    intensities = None if scan.intensities is None else np.asarray(scan.intensities, dtype=float).tolist()
     return LaserScan(
         timestamp=timestamp(scan.time_s), frame_id=scan.sensor,
-        start_angle=float(angles[0]), end_angle=float(angles[-1]), ranges=ranges.tolist(),
+        start_angle=float(angles[0]), end_angle=float(angles[-1]), ranges=ranges.tolist(), intensities=intensities,
     )
 
 
@@ -113,6 +118,9 @@ def device_values(scan: Scan) -> dict:
         "sensor": scan.sensor, "model": scan.model, "unit": scan.unit,
         "angles_rad": np.round(np.asarray(scan.angles_rad, dtype=float), 9).tolist(),
         "values": np.asarray(scan.values, dtype=np.int64).tolist(),
+        **{name: np.asarray(array, dtype=np.int64).tolist() for name, array in (
+            ("intensities", scan.intensities), ("echoes", scan.echoes), ("echo_intensities", scan.echo_intensities),
+        ) if array is not None},
     }
 
 

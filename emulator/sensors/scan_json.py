@@ -2,10 +2,15 @@
 
 The scan as its ROS driver publishes it (`published.py`): only the beams the
 device measures, and the LaserScan fields (`angle_min` … `range_max`) beside
-the wire values and metres.
+the wire values and metres. What a model reports besides ranges comes too:
+`intensities` (per value), every echo (`echoes` on the wire, nearest first,
+-1 past a beam's last; `echo_ranges_m`; `echo_intensities`), an LMS200's
+`reflector` bits.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -37,6 +42,17 @@ def scan_json(scan: Scan, sensor: Sensor | None = None, period_s: float | None =
         "pose": pose_json(sensor, scan.time_s),
         "times_s": np.round(beam_times_s(scan), TIME_DECIMALS).tolist(),
     }
+    reported = {}
+    if scan.intensities is not None:
+        reported["intensities"] = scan.intensities.astype(int).tolist()
+    if scan.echoes is not None:
+        echo_ranges = np.where(scan.echoes >= 0, ranges_m(dataclasses.replace(scan, values=scan.echoes)), np.nan)
+        reported["echoes"] = scan.echoes.astype(int).tolist()
+        reported["echo_ranges_m"] = _metres(echo_ranges)
+    if scan.echo_intensities is not None:
+        reported["echo_intensities"] = scan.echo_intensities.astype(int).tolist()
+    if scan.reflector is not None:
+        reported["reflector"] = scan.reflector.astype(bool).tolist()
     return {
         "sensor": scan.sensor,
         "model": scan.model,
@@ -44,7 +60,13 @@ def scan_json(scan: Scan, sensor: Sensor | None = None, period_s: float | None =
         "unit": scan.unit,
         "angles_deg": np.round(np.degrees(scan.angles_rad), ANGLE_DECIMALS).tolist(),
         "values": [int(v) for v in scan.values],
-        "ranges_m": [None if np.isnan(r) else float(r) for r in ranges],
+        "ranges_m": _metres(ranges),
+        **reported,
         **laser_scan_fields(scan, sensor.configured_period_s if sensor is not None else period_s),
         **extra,
     }
+
+
+def _metres(ranges: np.ndarray) -> list:
+    """Metres as JSON numbers, NaN (an error code, no echo) as null: one numpy pass, not one per value."""
+    return np.where(np.isnan(ranges), None, ranges).tolist()

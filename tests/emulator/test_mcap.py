@@ -108,3 +108,22 @@ def test_foxglove_json_laserscan_and_hostile_files(tmp_path: Path) -> None:
     broken.write_bytes(path.read_bytes()[:200])
     with pytest.raises(UserError, match="broken.mcap"):
         read_laser_scans(broken, "/front")
+
+
+def test_record_mcap_holds_a_multi_echo_units_intensities_and_echoes(tmp_path: Path) -> None:
+    """rescue's UTM-30LX-EW under `physical`: the LaserScan's intensities, and the wire values' echoes
+    and their intensities, as `scan` gives them."""
+    out = tmp_path / "rescue.mcap"
+    run_cli("record", "rescue", "--sensor", "utm", "--model", "physical", "--start", "20", "--end", "20.05",
+            "--out", str(out), "--format", "mcap")
+    with out.open("rb") as file:
+        reader = make_reader(file, decoder_factories=[ProtobufDecoderFactory()])
+        decoded = [message for _, _, _, message in reader.iter_decoded_messages(topics=["/utm/scan"])]
+    with out.open("rb") as file:
+        values = [json.loads(message.data) for _, _, message in make_reader(file).iter_messages(topics=["/utm/values"])]
+    assert len(decoded) == len(values) == 3  # 40 Hz
+    reference = json.loads(run_cli("scan", "rescue", "--sensor", "utm", "--model", "physical", "--time", "20"))
+    assert list(decoded[0].intensities) == [float(v) for v in reference["intensities"]]
+    assert values[0]["intensities"] == reference["intensities"]
+    assert values[0]["echoes"] == reference["echoes"] and values[0]["echo_intensities"] == reference["echo_intensities"]
+    assert sum(row[1] >= 0 for row in values[0]["echoes"]) > 100  # the wall behind the smoke

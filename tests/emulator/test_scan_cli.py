@@ -8,9 +8,11 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from emulator.scene import load_scene
+from emulator.scene.sick_models import MODELS as SICK_MODELS
 from emulator.sensors import create_sensor
 from emulator.sensors.response import apply_model_override
 
@@ -153,3 +155,35 @@ def test_unknown_model_is_one_line_exit_2(scene_file):
     result = lrf("scan", str(scene_file), "--sensor", "urg", "--model", "fog9000")
     assert result.returncode == 2 and result.stdout == ""
     assert result.stderr.count("\n") == 1 and "fog9000" in result.stderr and "physical" in result.stderr
+
+
+def test_a_multi_echo_units_json_has_its_intensities_and_every_echo():
+    """rescue's UTM-30LX-EW in its haze (`physical`): intensities, echoes (nearest first, -1 past a
+    beam's last), their ranges and intensities, as the sensor computed them; the first echo slot is
+    what ND sends, the values what GD sends."""
+    out = scan("rescue", "--sensor", "utm", "--model", "physical", "--time", "20")
+    expected = create_sensor(apply_model_override(load_scene("rescue"), "physical"), "utm").scan(20.0)
+    assert out["intensities"] == expected.intensities.tolist() and len(out["intensities"]) == 1081
+    assert out["echoes"] == expected.echoes.tolist() and out["echo_intensities"] == expected.echo_intensities.tolist()
+    echoes = np.array(out["echoes"])
+    assert (echoes[:, 1] >= 0).sum() > 100  # the smoke in the first echo, the wall behind in the next
+    for row, ranges in zip(out["echoes"], out["echo_ranges_m"]):
+        assert ranges == [value / 1000 if value >= 23 else None for value in row]
+    assert "reflector" not in out
+
+
+def test_the_lms200s_json_has_its_reflector_bits_and_a_urgs_nothing_it_lacks(scene_file):
+    lms = scan(str(scene_file), "--sensor", "lms", "--time", "0")
+    assert lms["reflector"] == [False] * 101  # no retro-reflector in the scene
+    urg = scan(str(scene_file), "--sensor", "urg", "--time", "0")
+    assert not {"intensities", "echoes", "echo_ranges_m", "echo_intensities", "reflector"} & set(urg)
+
+
+def test_a_cola_units_echo_ranges_follow_its_distance_scale():
+    """marulan's LMS511 (5 echoes, 2 mm a count): echoes with no return are -1 and null in metres."""
+    out = scan("marulan", "--sensor", "lms5", "--model", "physical", "--time", "5")
+    echoes = np.array(out["echoes"])
+    assert echoes.shape[1] == 5 and (echoes == -1).any() and (echoes > 0).any()
+    scale_mm = SICK_MODELS["lms511"].distance_scale
+    for row, ranges in zip(out["echoes"], out["echo_ranges_m"]):
+        assert ranges == [value * scale_mm / 1000 if value > 0 else None for value in row]
