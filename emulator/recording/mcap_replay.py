@@ -5,7 +5,9 @@ SDKs write it, or JSON) and ROS 2 `sensor_msgs/msg/LaserScan` (CDR, as a ROS 2
 bag in MCAP holds it). Each scan's ranges are resampled onto the device's own
 beams (the nearest recorded beam within half a recorded step; beams the scan
 does not cover get "no echo") and turned into device values by the device's
-conventions (`laserscan.py`), in whatever unit the client asks for.
+conventions (`laserscan.py`), in whatever unit the client asks for. A Hokuyo
+that reports intensity (UTM, UST) serves the scans' intensities, resampled
+alike (0 where a scan has none).
 
 Time: simulated time 0 is the first message; each scan is stamped with its
 header time (the log time when a message has none); the recording loops as a
@@ -45,6 +47,7 @@ MAX_MESSAGES = 500_000
 MAX_BEAMS = 20_000
 LASERSCAN_SCHEMAS = ("foxglove.LaserScan", "sensor_msgs/msg/LaserScan")
 LMS_GRID_STEP_DEG = 0.25  # the finest LMS200 resolution: every window a client can ask for lies on it
+INTENSITY_MAX = (1 << 18) - 1  # the most a SCIP intensity field (3 characters) holds
 
 
 class _JsonDecoderFactory(DecoderFactory):
@@ -58,7 +61,8 @@ class _JsonDecoderFactory(DecoderFactory):
 
 @dataclass(frozen=True)
 class LaserScans:
-    """A topic's scans: times (n,) from 0, and per scan its first angle, step and ranges (metres)."""
+    """A topic's scans: times (n,) from 0, and per scan its first angle, step, ranges (metres) and
+    intensities (None where a scan has none, one per range otherwise)."""
 
     topic: str
     times_s: np.ndarray
@@ -66,6 +70,7 @@ class LaserScans:
     steps_rad: np.ndarray
     ranges_m: list[np.ndarray]
     range_limits_m: list[tuple[float, float]]
+    intensities: list[np.ndarray | None]
 
 
 def _field(message: Any, name: str, default: Any = None) -> Any:
@@ -113,7 +118,7 @@ def read_laser_scans(path: Path, topic: str | None) -> LaserScans:
 
 def laser_scans(path: Path, topic: str, messages: Iterable[tuple[Any, int]]) -> LaserScans:
     """The decoded LaserScans of `topic` (each with its log time in ns), checked and ordered by stamp."""
-    times, starts, steps, ranges, limits = [], [], [], [], []
+    times, starts, steps, ranges, limits, intensities = [], [], [], [], [], []
     for decoded, log_time_ns in messages:
         if len(times) >= MAX_MESSAGES:
             raise UserError(f"{path.name}: topic {topic}: more than {MAX_MESSAGES} scans")
@@ -123,15 +128,17 @@ def laser_scans(path: Path, topic: str, messages: Iterable[tuple[Any, int]]) -> 
         start, step, limit = _scan_geometry(decoded, values.size)
         if not (np.isfinite(start) and np.isfinite(step)) or (values.size > 1 and step == 0.0):
             raise UserError(f"{path.name}: topic {topic}: a scan without a usable angle step")
+        strengths = np.asarray(_field(decoded, "intensities", ()), dtype=float).ravel()
         times.append(_stamp_s(decoded, log_time_ns))
         starts.append(start), steps.append(step), ranges.append(values), limits.append(limit)
+        intensities.append(strengths if strengths.size == values.size else None)  # ROS: empty or one per range
     if not times:
         raise UserError(f"{path.name}: topic {topic}: no scans")
     order = np.argsort(np.asarray(times), kind="stable")
     times_s = np.asarray(times)[order]
     return LaserScans(
         topic, times_s - times_s[0], np.asarray(starts)[order], np.asarray(steps)[order],
-        [ranges[i] for i in order], [limits[i] for i in order],
+        [ranges[i] for i in order], [limits[i] for i in order], [intensities[i] for i in order],
     )
 
 
@@ -152,10 +159,12 @@ def _choose_topic(path: Path, reader: Any, topic: str | None) -> str:
     return topic
 
 
-def _resample(scans: LaserScans, grid_rad: np.ndarray) -> np.ndarray:
-    """(n, len(grid)) ranges on the device's beams: the nearest recorded beam within half a
-    recorded step (a beam halfway takes the next one), +inf (no echo) where the scan does not reach."""
+def _resample(scans: LaserScans, grid_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(n, len(grid)) ranges and intensities on the device's beams: the nearest recorded beam within
+    half a recorded step (a beam halfway takes the next one); where the scan does not reach, +inf (no
+    echo) and intensity 0."""
     table = np.full((len(scans.ranges_m), len(grid_rad)), np.inf)
+    strengths = np.zeros(table.shape)
     for row, (ranges, start, step) in enumerate(zip(scans.ranges_m, scans.start_angles_rad, scans.steps_rad)):
         if ranges.size == 1:
             index = np.zeros(len(grid_rad), dtype=np.int64)
@@ -164,7 +173,9 @@ def _resample(scans: LaserScans, grid_rad: np.ndarray) -> np.ndarray:
             index = np.floor((grid_rad - start) / step + 0.5).astype(np.int64)  # halves go up
             near = (index >= 0) & (index < ranges.size) & (np.abs(start + index * step - grid_rad) <= abs(step) / 2 + 1e-9)
         table[row, near] = ranges[index[near]]
-    return table
+        if scans.intensities[row] is not None:
+            strengths[row, near] = scans.intensities[row][index[near]]
+    return table, strengths
 
 
 class LaserScanReplay:
@@ -183,7 +194,10 @@ class LaserScanReplay:
         else:
             raise UserError(f"unknown model {model!r}")
         self._clock = ReplayClock(scans.times_s, self.period_s)
-        self._ranges = _resample(scans, self._grid)
+        self._ranges, strengths = _resample(scans, self._grid)
+        # on the unit's scale: whole, 0..its largest (a recording's floats, or another unit's scale)
+        self._intensities = np.clip(np.rint(np.nan_to_num(strengths)), 0, INTENSITY_MAX).astype(np.int64) \
+            if hokuyo is not None and hokuyo.has_intensity else None
         self._limits = scans.range_limits_m
 
     def _row(self, time_s: float, unit: str) -> np.ndarray:
@@ -193,7 +207,8 @@ class LaserScanReplay:
 
     def scan(self, time_s: float, *, start_deg: float = 0.0, step_deg: float = 0.5, count: int = 361, unit: str = "mm") -> Scan:
         if hokuyo_model(self.model) is not None:
-            return Scan(self.name, self.model, time_s, self._grid, self._row(time_s, "mm"), "mm")
+            intensities = None if self._intensities is None else self._intensities[self._clock.row_at(time_s)]
+            return Scan(self.name, self.model, time_s, self._grid, self._row(time_s, "mm"), "mm", intensities=intensities)
         wanted = np.radians(lms200.device_angles_deg(start_deg, step_deg, count) - 90.0)
         columns = np.clip(np.round((wanted - self._grid[0]) / np.radians(LMS_GRID_STEP_DEG)).astype(np.int64), 0, len(self._grid) - 1)
         values = self._row(time_s, unit)[columns]

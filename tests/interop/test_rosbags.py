@@ -262,3 +262,24 @@ def test_a_broken_bag_is_one_line_exit_2(bags: Path, tmp_path: Path, broken: str
     result = run("replay", broken, "--device", "urg-04lx", "--topic", "/urg/scan", "--endpoint", "tcp:127.0.0.1:0", cwd=tmp_path)
     assert result.returncode == 2 and "Traceback" not in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1 and f"{broken}: cannot read the bag" in result.stderr
+
+
+@pytest.mark.parametrize("fmt, out, topic", [("rosbag2", "utm", "/utm/scan"), ("mcap", "utm.mcap", "/utm/scan")])
+def test_replay_serves_a_recorded_utms_intensities_to_hokuyolx(tmp_path: Path, tcp_port: int, fmt: str, out: str, topic: str) -> None:
+    """rescue's UTM-30LX-EW in its haze (`physical`), recorded, then replayed as a UTM-30LX-EW: hokuyolx's
+    GE (range and intensity) gets a recorded scan's ranges and intensities (it got intensity 0)."""
+    result = run("record", "rescue", "--sensor", "utm", "--model", "physical", "--start", "20", "--end", "20.2",
+                 "--format", fmt, "--out", out, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    recorded = [json.loads(run("scan", "rescue", "--sensor", "utm", "--model", "physical", "--time", repr(20 + k * 0.025),
+                               cwd=tmp_path).stdout) for k in range(9)]
+    with replaying(tmp_path / out, "utm-30lx-ew", f"tcp:127.0.0.1:{tcp_port}", tmp_path, "--topic", topic) as ready:
+        laser = HokuyoLX(addr=ready.address, tsync=False, convert_time=False)
+        try:
+            _, scan = laser.get_intens()  # (steps, 2): range, intensity
+        finally:
+            laser.close()
+    ranges, intensities = scan[:, 0], scan[:, 1]
+    match = [reference for reference in recorded if np.array_equal(ranges, reference["values"])]
+    assert match, "the ranges are none of the recorded scans'"
+    assert np.array_equal(intensities, match[0]["intensities"]) and np.count_nonzero(intensities) > 500
