@@ -31,6 +31,7 @@ class ScanTelegram:
     distances: list[int]
     channels: list[str]
     received_s: float
+    rssi: list[int] | None = None  # RSSI1, if the telegram has it
 
 
 class ColaClient:
@@ -86,7 +87,7 @@ class ColaClient:
 
 
 def parse_scandata(payload: bytes, dialect: Dialect, received_s: float = 0.0) -> ScanTelegram:
-    """The header fields and DIST1 of an LMDscandata telegram (channel names listed)."""
+    """The header fields, DIST1 and RSSI1 of an LMDscandata telegram (channel names listed)."""
     fields = _Fields(payload.split(b" ", 2)[2], dialect)
     fields.skip(["u16", "u16", "u32", "u8", "u8"])
     telegram, scan = fields.take("u16"), fields.take("u16")
@@ -98,6 +99,7 @@ def parse_scandata(payload: bytes, dialect: Dialect, received_s: float = 0.0) ->
         fields.skip(["u32", "u16"])
     channels: list[str] = []
     distances: list[int] = []
+    rssi: list[int] | None = None
     start = step = 0
     for width in ("u16", "u8"):
         for _ in range(fields.take("u16")):
@@ -108,7 +110,9 @@ def parse_scandata(payload: bytes, dialect: Dialect, received_s: float = 0.0) ->
             channels.append(name)
             if name == "DIST1":
                 start, step, distances = channel_start, channel_step, values
-    return ScanTelegram(telegram, scan, power_up, transmission, frequency, start, step, distances, channels, received_s)
+            elif name == "RSSI1":
+                rssi = values
+    return ScanTelegram(telegram, scan, power_up, transmission, frequency, start, step, distances, channels, received_s, rssi)
 
 
 class _Fields:

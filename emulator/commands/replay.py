@@ -134,7 +134,8 @@ def _run_mcap(args: argparse.Namespace) -> int:
     scans = read_bag_laser_scans(args.log, args.topic) if is_bag(args.log) else read_laser_scans(args.log, args.topic)
     name = DEFAULT_NAMES[args.model]
     sensor = LaserScanReplay(scans, args.model, name)
-    scene = sensor_only_scene(SensorSpec(name, args.model, Pose(), tuple(args.endpoint or [DEFAULT_ENDPOINTS[args.model]]), {}))
+    options = sensor.scan_configuration() if args.model in SICK_MODELS else {}  # powers on as it was recorded
+    scene = sensor_only_scene(SensorSpec(name, args.model, Pose(), tuple(args.endpoint or [DEFAULT_ENDPOINTS[args.model]]), options))
     serve_until_signalled(Daemon(scene, _given(scene, args.endpoint), WallClock(), sensor_factory=lambda spec: sensor))
     return 0
 

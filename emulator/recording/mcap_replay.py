@@ -1,4 +1,5 @@
-"""A LaserScan topic of an MCAP file served as a URG-04LX or LMS200 (`replay FILE.mcap --topic T`).
+"""A LaserScan topic of an MCAP file or ROS bag served as a Hokuyo, an LMS200 or a CoLa SICK
+(`replay FILE --topic T`).
 
 Reads `foxglove.LaserScan` (protobuf, as `record --format mcap` and Foxglove's
 SDKs write it, or JSON) and ROS 2 `sensor_msgs/msg/LaserScan` (CDR, as a ROS 2
@@ -7,7 +8,8 @@ beams (the nearest recorded beam within half a recorded step; beams the scan
 does not cover get "no echo") and turned into device values by the device's
 conventions (`laserscan.py`), in whatever unit the client asks for. A Hokuyo
 that reports intensity (UTM, UST) serves the scans' intensities, resampled
-alike (0 where a scan has none).
+alike (0 where a scan has none). A CoLa SICK serves them as its first echo and
+its RSSI, on the grid of whichever scan configuration its client sets.
 
 Time: simulated time 0 is the first message; each scan is stamped with its
 header time (the log time when a message has none); the recording loops as a
@@ -40,7 +42,10 @@ from emulator.recording.replay_sources import (
     LMS_REVOLUTION_S,
     ReplayClock,
 )
+from emulator.scene.sick_models import ANGLE_TICKS_PER_DEG, FREQUENCY_TICKS_PER_HZ
+from emulator.scene.sick_models import MODELS as SICK_MODELS
 from emulator.sensors import hokuyo_model, lms200
+from emulator.sensors.physical.params import PULSED_RECEIVERS
 from emulator.sensors.scan import Scan
 
 MAX_MESSAGES = 500_000
@@ -179,12 +184,20 @@ def _resample(scans: LaserScans, grid_rad: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 class LaserScanReplay:
-    """A Hokuyo or LMS200 serving a LaserScan topic (module docstring); answers the same
-    calls as the simulated sensors."""
+    """A Hokuyo, an LMS200 or a CoLa SICK serving a LaserScan topic (module docstring); answers the
+    same calls as the simulated sensors."""
 
     def __init__(self, scans: LaserScans, model: str, name: str) -> None:
         self.model, self.name = model, name
+        self._scans = scans
+        self._cola_grids: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # beams → angles, ranges, RSSI
         hokuyo = hokuyo_model(model)
+        if model in SICK_MODELS:
+            sick = SICK_MODELS[model]
+            self._clock = ReplayClock(scans.times_s, FREQUENCY_TICKS_PER_HZ / sick.default[0])
+            self.period_s = self._clock.period_s
+            self._limits = scans.range_limits_m
+            return
         if hokuyo is not None:
             self._grid = hokuyo.step_angles_rad()
             self.period_s = hokuyo.period_s
@@ -205,7 +218,19 @@ class LaserScanReplay:
         low, high = self._limits[row]
         return ranges_to_values(self._ranges[row], self.model, unit, low, high)
 
-    def scan(self, time_s: float, *, start_deg: float = 0.0, step_deg: float = 0.5, count: int = 361, unit: str = "mm") -> Scan:
+    def scan_configuration(self) -> dict[str, float]:
+        """A CoLa SICK's scene options: the offered scan configuration nearest the recording's rate and spacing."""
+        sick = SICK_MODELS[self.model]
+        resolution_ticks = abs(float(np.median(self._scans.steps_rad))) * 180 / np.pi * ANGLE_TICKS_PER_DEG
+        pairs = [(f, r) for f, resolutions in sick.scan_configs.items() for r in resolutions]
+        frequency, resolution = min(pairs, key=lambda pair: (abs(FREQUENCY_TICKS_PER_HZ / pair[0] - self.period_s),
+                                                            abs(pair[1] - resolution_ticks)))
+        return {"scan_frequency_hz": frequency / FREQUENCY_TICKS_PER_HZ, "resolution_deg": resolution / ANGLE_TICKS_PER_DEG}
+
+    def scan(self, time_s: float, *, start_deg: float = 0.0, step_deg: float = 0.5, count: int = 361, unit: str = "mm",
+             frequency_ticks: int | None = None, resolution_ticks: int | None = None, fog_filter: bool = False) -> Scan:
+        if self.model in SICK_MODELS:
+            return self._cola_scan(time_s, resolution_ticks)
         if hokuyo_model(self.model) is not None:
             intensities = None if self._intensities is None else self._intensities[self._clock.row_at(time_s)]
             return Scan(self.name, self.model, time_s, self._grid, self._row(time_s, "mm"), "mm", intensities=intensities)
@@ -214,6 +239,24 @@ class LaserScanReplay:
         values = self._row(time_s, unit)[columns]
         values = np.where(np.abs(self._grid[columns] - wanted) <= 1e-6, values, LMS_NO_ECHO)
         return Scan(self.name, self.model, time_s, wanted, values, unit)
+
+    def _cola_scan(self, time_s: float, resolution_ticks: int | None) -> Scan:
+        """The whole field at the client's resolution: the recorded range as echo 1 (0 and -1: none), its RSSI."""
+        sick = SICK_MODELS[self.model]
+        count = sick.beam_count(resolution_ticks or sick.default[1])
+        if count not in self._cola_grids:  # resampled once per resolution a client sets
+            angles = np.radians(np.linspace(sick.start_deg, sick.stop_deg, count) - 90.0)
+            ranges, strengths = _resample(self._scans, angles)
+            rssi_max = PULSED_RECEIVERS[self.model].intensity_max
+            self._cola_grids[count] = (angles, ranges, np.clip(np.rint(np.nan_to_num(strengths)), 0, rssi_max).astype(np.int64))
+        angles, ranges, strengths = self._cola_grids[count]
+        row = self._clock.row_at(time_s)
+        values = ranges_to_values(ranges[row], self.model, "mm", *self._limits[row])
+        echoes = np.full((count, sick.echoes), -1, np.int64)
+        echoes[:, 0] = np.where(values > 0, values, -1)
+        powers = np.where(echoes >= 0, 0, -1)
+        powers[:, 0] = np.where(values > 0, strengths[row], -1)
+        return Scan(self.name, self.model, time_s, angles, values, "mm", None, np.where(values > 0, strengths[row], 0), echoes, powers)
 
     def scans(self, times_s: Sequence[float], **request: Any) -> list[Scan]:
         return [self.scan(time_s, **request) for time_s in times_s]
