@@ -164,12 +164,13 @@ def _choose_topic(path: Path, reader: Any, topic: str | None) -> str:
     return topic
 
 
-def _resample(scans: LaserScans, grid_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(n, len(grid)) ranges and intensities on the device's beams: the nearest recorded beam within
-    half a recorded step (a beam halfway takes the next one); where the scan does not reach, +inf (no
-    echo) and intensity 0."""
+def _resample(scans: LaserScans, grid_rad: np.ndarray, intensities: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """(n, len(grid)) ranges and (if asked for and any scan has them) intensities on the device's beams:
+    the nearest recorded beam within half a recorded step (a beam halfway takes the next one); where
+    the scan does not reach, +inf (no echo) and intensity 0."""
     table = np.full((len(scans.ranges_m), len(grid_rad)), np.inf)
-    strengths = np.zeros(table.shape)
+    wanted = intensities and any(row is not None for row in scans.intensities)
+    strengths = np.zeros(table.shape) if wanted else None
     for row, (ranges, start, step) in enumerate(zip(scans.ranges_m, scans.start_angles_rad, scans.steps_rad)):
         if ranges.size == 1:
             index = np.zeros(len(grid_rad), dtype=np.int64)
@@ -178,9 +179,15 @@ def _resample(scans: LaserScans, grid_rad: np.ndarray) -> tuple[np.ndarray, np.n
             index = np.floor((grid_rad - start) / step + 0.5).astype(np.int64)  # halves go up
             near = (index >= 0) & (index < ranges.size) & (np.abs(start + index * step - grid_rad) <= abs(step) / 2 + 1e-9)
         table[row, near] = ranges[index[near]]
-        if scans.intensities[row] is not None:
+        if strengths is not None and scans.intensities[row] is not None:
             strengths[row, near] = scans.intensities[row][index[near]]
     return table, strengths
+
+
+def _on_scale(strengths: np.ndarray, largest: int) -> np.ndarray:
+    """Recorded intensities on a unit's scale: whole, 0..its largest (a recording holds floats, maybe of
+    another unit's scale)."""
+    return np.clip(np.rint(np.nan_to_num(strengths)), 0, largest).astype(np.int64)
 
 
 class LaserScanReplay:
@@ -190,7 +197,7 @@ class LaserScanReplay:
     def __init__(self, scans: LaserScans, model: str, name: str) -> None:
         self.model, self.name = model, name
         self._scans = scans
-        self._cola_grids: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # beams → angles, ranges, RSSI
+        self._cola_grids: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray | None]] = {}  # beams → angles, ranges, RSSI
         hokuyo = hokuyo_model(model)
         if model in SICK_MODELS:
             sick = SICK_MODELS[model]
@@ -207,10 +214,8 @@ class LaserScanReplay:
         else:
             raise UserError(f"unknown model {model!r}")
         self._clock = ReplayClock(scans.times_s, self.period_s)
-        self._ranges, strengths = _resample(scans, self._grid)
-        # on the unit's scale: whole, 0..its largest (a recording's floats, or another unit's scale)
-        self._intensities = np.clip(np.rint(np.nan_to_num(strengths)), 0, INTENSITY_MAX).astype(np.int64) \
-            if hokuyo is not None and hokuyo.has_intensity else None
+        self._ranges, strengths = _resample(scans, self._grid, hokuyo is not None and hokuyo.has_intensity)
+        self._intensities = None if strengths is None else _on_scale(strengths, INTENSITY_MAX)
         self._limits = scans.range_limits_m
 
     def _row(self, time_s: float, unit: str) -> np.ndarray:
@@ -246,17 +251,18 @@ class LaserScanReplay:
         count = sick.beam_count(resolution_ticks or sick.default[1])
         if count not in self._cola_grids:  # resampled once per resolution a client sets
             angles = np.radians(np.linspace(sick.start_deg, sick.stop_deg, count) - 90.0)
-            ranges, strengths = _resample(self._scans, angles)
-            rssi_max = PULSED_RECEIVERS[self.model].intensity_max
-            self._cola_grids[count] = (angles, ranges, np.clip(np.rint(np.nan_to_num(strengths)), 0, rssi_max).astype(np.int64))
-        angles, ranges, strengths = self._cola_grids[count]
+            ranges, strengths = _resample(self._scans, angles, True)
+            rssi = None if strengths is None else _on_scale(strengths, PULSED_RECEIVERS[self.model].intensity_max)
+            self._cola_grids[count] = (angles, ranges, rssi)
+        angles, ranges, rssi = self._cola_grids[count]
         row = self._clock.row_at(time_s)
         values = ranges_to_values(ranges[row], self.model, "mm", *self._limits[row])
+        strengths = np.where(values > 0, rssi[row] if rssi is not None else 0, 0)
         echoes = np.full((count, sick.echoes), -1, np.int64)
         echoes[:, 0] = np.where(values > 0, values, -1)
         powers = np.where(echoes >= 0, 0, -1)
-        powers[:, 0] = np.where(values > 0, strengths[row], -1)
-        return Scan(self.name, self.model, time_s, angles, values, "mm", None, np.where(values > 0, strengths[row], 0), echoes, powers)
+        powers[:, 0] = np.where(values > 0, strengths, -1)
+        return Scan(self.name, self.model, time_s, angles, values, "mm", None, strengths, echoes, powers)
 
     def scans(self, times_s: Sequence[float], **request: Any) -> list[Scan]:
         return [self.scan(time_s, **request) for time_s in times_s]
