@@ -21,6 +21,7 @@ each are read; anything else is a one-line error naming the file and topic.
 
 from __future__ import annotations
 
+import functools
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -53,6 +54,7 @@ MAX_BEAMS = 20_000
 LASERSCAN_SCHEMAS = ("foxglove.LaserScan", "sensor_msgs/msg/LaserScan")
 LMS_GRID_STEP_DEG = 0.25  # the finest LMS200 resolution: every window a client can ask for lies on it
 INTENSITY_MAX = (1 << 18) - 1  # the most a SCIP intensity field (3 characters) holds
+ROWS_KEPT = 64  # resampled scans kept: the few a replay's clients read around now
 
 
 class _JsonDecoderFactory(DecoderFactory):
@@ -164,24 +166,25 @@ def _choose_topic(path: Path, reader: Any, topic: str | None) -> str:
     return topic
 
 
-def _resample(scans: LaserScans, grid_rad: np.ndarray, intensities: bool) -> tuple[np.ndarray, np.ndarray | None]:
-    """(n, len(grid)) ranges and (if asked for and any scan has them) intensities on the device's beams:
-    the nearest recorded beam within half a recorded step (a beam halfway takes the next one); where
-    the scan does not reach, +inf (no echo) and intensity 0."""
-    table = np.full((len(scans.ranges_m), len(grid_rad)), np.inf)
-    wanted = intensities and any(row is not None for row in scans.intensities)
-    strengths = np.zeros(table.shape) if wanted else None
-    for row, (ranges, start, step) in enumerate(zip(scans.ranges_m, scans.start_angles_rad, scans.steps_rad)):
-        if ranges.size == 1:
-            index = np.zeros(len(grid_rad), dtype=np.int64)
-            near = np.abs(grid_rad - start) <= 1e-4
-        else:
-            index = np.floor((grid_rad - start) / step + 0.5).astype(np.int64)  # halves go up
-            near = (index >= 0) & (index < ranges.size) & (np.abs(start + index * step - grid_rad) <= abs(step) / 2 + 1e-9)
-        table[row, near] = ranges[index[near]]
-        if strengths is not None and scans.intensities[row] is not None:
-            strengths[row, near] = scans.intensities[row][index[near]]
-    return table, strengths
+def _resample(scans: LaserScans, row: int, grid_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """Scan `row`'s ranges and (if it has them) intensities on the device's beams: the nearest recorded
+    beam within half a recorded step (a beam halfway takes the next one); where the scan does not reach,
+    +inf (no echo) and intensity 0."""
+    ranges, start, step = scans.ranges_m[row], scans.start_angles_rad[row], scans.steps_rad[row]
+    if ranges.size == 1:
+        index = np.zeros(len(grid_rad), dtype=np.int64)
+        near = np.abs(grid_rad - start) <= 1e-4
+    else:
+        index = np.floor((grid_rad - start) / step + 0.5).astype(np.int64)  # halves go up
+        near = (index >= 0) & (index < ranges.size) & (np.abs(start + index * step - grid_rad) <= abs(step) / 2 + 1e-9)
+    resampled = np.full(len(grid_rad), np.inf)
+    resampled[near] = ranges[index[near]]
+    recorded = scans.intensities[row]
+    if recorded is None:
+        return resampled, None
+    strengths = np.zeros(len(grid_rad))
+    strengths[near] = recorded[index[near]]
+    return resampled, strengths
 
 
 def _on_scale(strengths: np.ndarray, largest: int) -> np.ndarray:
@@ -197,14 +200,18 @@ class LaserScanReplay:
     def __init__(self, scans: LaserScans, model: str, name: str) -> None:
         self.model, self.name = model, name
         self._scans = scans
-        self._cola_grids: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray | None]] = {}  # beams → angles, ranges, RSSI
+        self._grids: dict[int, np.ndarray] = {}  # beams → their angles (a CoLa SICK's, per resolution its client sets)
+        # a scan resampled as it is first asked for (a long recording is not resampled whole, up front)
+        self._on_grid = functools.lru_cache(maxsize=ROWS_KEPT)(self._resampled)
         hokuyo = hokuyo_model(model)
         if model in SICK_MODELS:
             sick = SICK_MODELS[model]
+            self._intensity_max = PULSED_RECEIVERS[model].intensity_max
             self._clock = ReplayClock(scans.times_s, FREQUENCY_TICKS_PER_HZ / sick.default[0])
             self.period_s = self._clock.period_s
             self._limits = scans.range_limits_m
             return
+        self._intensity_max = INTENSITY_MAX if hokuyo is not None and hokuyo.has_intensity else None
         if hokuyo is not None:
             self._grid = hokuyo.step_angles_rad()
             self.period_s = hokuyo.period_s
@@ -213,15 +220,20 @@ class LaserScanReplay:
             self.period_s = LMS_REVOLUTION_S
         else:
             raise UserError(f"unknown model {model!r}")
+        self._grids[len(self._grid)] = self._grid
         self._clock = ReplayClock(scans.times_s, self.period_s)
-        self._ranges, strengths = _resample(scans, self._grid, hokuyo is not None and hokuyo.has_intensity)
-        self._intensities = None if strengths is None else _on_scale(strengths, INTENSITY_MAX)
         self._limits = scans.range_limits_m
 
-    def _row(self, time_s: float, unit: str) -> np.ndarray:
+    def _resampled(self, row: int, beams: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """Scan `row` on the grid of `beams` beams: ranges, and intensities on the unit's scale (None: none)."""
+        ranges, strengths = _resample(self._scans, row, self._grids[beams])
+        return ranges, None if strengths is None or self._intensity_max is None else _on_scale(strengths, self._intensity_max)
+
+    def _row(self, time_s: float, unit: str) -> tuple[np.ndarray, np.ndarray | None]:
+        """The device values and intensities of the scan recorded at or before `time_s`, on the device's grid."""
         row = self._clock.row_at(time_s)
-        low, high = self._limits[row]
-        return ranges_to_values(self._ranges[row], self.model, unit, low, high)
+        ranges, strengths = self._on_grid(row, len(self._grid))
+        return ranges_to_values(ranges, self.model, unit, *self._limits[row]), strengths
 
     def scan_configuration(self) -> dict[str, float]:
         """A CoLa SICK's scene options: the offered scan configuration nearest the recording's rate and spacing."""
@@ -237,11 +249,11 @@ class LaserScanReplay:
         if self.model in SICK_MODELS:
             return self._cola_scan(time_s, resolution_ticks)
         if hokuyo_model(self.model) is not None:
-            intensities = None if self._intensities is None else self._intensities[self._clock.row_at(time_s)]
-            return Scan(self.name, self.model, time_s, self._grid, self._row(time_s, "mm"), "mm", intensities=intensities)
+            values, intensities = self._row(time_s, "mm")
+            return Scan(self.name, self.model, time_s, self._grid, values, "mm", intensities=intensities)
         wanted = np.radians(lms200.device_angles_deg(start_deg, step_deg, count) - 90.0)
         columns = np.clip(np.round((wanted - self._grid[0]) / np.radians(LMS_GRID_STEP_DEG)).astype(np.int64), 0, len(self._grid) - 1)
-        values = self._row(time_s, unit)[columns]
+        values = self._row(time_s, unit)[0][columns]
         values = np.where(np.abs(self._grid[columns] - wanted) <= 1e-6, values, LMS_NO_ECHO)
         return Scan(self.name, self.model, time_s, wanted, values, unit)
 
@@ -249,15 +261,13 @@ class LaserScanReplay:
         """The whole field at the client's resolution: the recorded range as echo 1 (0 and -1: none), its RSSI."""
         sick = SICK_MODELS[self.model]
         count = sick.beam_count(resolution_ticks or sick.default[1])
-        if count not in self._cola_grids:  # resampled once per resolution a client sets
-            angles = np.radians(np.linspace(sick.start_deg, sick.stop_deg, count) - 90.0)
-            ranges, strengths = _resample(self._scans, angles, True)
-            rssi = None if strengths is None else _on_scale(strengths, PULSED_RECEIVERS[self.model].intensity_max)
-            self._cola_grids[count] = (angles, ranges, rssi)
-        angles, ranges, rssi = self._cola_grids[count]
+        if count not in self._grids:
+            self._grids[count] = np.radians(np.linspace(sick.start_deg, sick.stop_deg, count) - 90.0)
+        angles = self._grids[count]
         row = self._clock.row_at(time_s)
-        values = ranges_to_values(ranges[row], self.model, "mm", *self._limits[row])
-        strengths = np.where(values > 0, rssi[row] if rssi is not None else 0, 0)
+        ranges, rssi = self._on_grid(row, count)
+        values = ranges_to_values(ranges, self.model, "mm", *self._limits[row])
+        strengths = np.where(values > 0, rssi if rssi is not None else 0, 0)
         echoes = np.full((count, sick.echoes), -1, np.int64)
         echoes[:, 0] = np.where(values > 0, values, -1)
         powers = np.where(echoes >= 0, 0, -1)
