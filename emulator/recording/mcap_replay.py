@@ -42,8 +42,10 @@ from emulator.recording.replay_sources import (
     LMS_NO_ECHO,
     LMS_REVOLUTION_S,
     ReplayClock,
+    cola_scan_configuration,
+    first_echo_scan,
 )
-from emulator.scene.sick_models import ANGLE_TICKS_PER_DEG, FREQUENCY_TICKS_PER_HZ
+from emulator.scene.sick_models import FREQUENCY_TICKS_PER_HZ
 from emulator.scene.sick_models import MODELS as SICK_MODELS
 from emulator.sensors import hokuyo_model, lms200
 from emulator.sensors.physical.params import PULSED_RECEIVERS
@@ -237,12 +239,7 @@ class LaserScanReplay:
 
     def scan_configuration(self) -> dict[str, float]:
         """A CoLa SICK's scene options: the offered scan configuration nearest the recording's rate and spacing."""
-        sick = SICK_MODELS[self.model]
-        resolution_ticks = abs(float(np.median(self._scans.steps_rad))) * 180 / np.pi * ANGLE_TICKS_PER_DEG
-        pairs = [(f, r) for f, resolutions in sick.scan_configs.items() for r in resolutions]
-        frequency, resolution = min(pairs, key=lambda pair: (abs(FREQUENCY_TICKS_PER_HZ / pair[0] - self.period_s),
-                                                            abs(pair[1] - resolution_ticks)))
-        return {"scan_frequency_hz": frequency / FREQUENCY_TICKS_PER_HZ, "resolution_deg": resolution / ANGLE_TICKS_PER_DEG}
+        return cola_scan_configuration(SICK_MODELS[self.model], self.period_s, abs(float(np.degrees(np.median(self._scans.steps_rad)))))
 
     def scan(self, time_s: float, *, start_deg: float = 0.0, step_deg: float = 0.5, count: int = 361, unit: str = "mm",
              frequency_ticks: int | None = None, resolution_ticks: int | None = None, fog_filter: bool = False) -> Scan:
@@ -267,12 +264,7 @@ class LaserScanReplay:
         row = self._clock.row_at(time_s)
         ranges, rssi = self._on_grid(row, count)
         values = ranges_to_values(ranges, self.model, "mm", *self._limits[row])
-        strengths = np.where(values > 0, rssi if rssi is not None else 0, 0)
-        echoes = np.full((count, sick.echoes), -1, np.int64)
-        echoes[:, 0] = np.where(values > 0, values, -1)
-        powers = np.where(echoes >= 0, 0, -1)
-        powers[:, 0] = np.where(values > 0, strengths, -1)
-        return Scan(self.name, self.model, time_s, angles, values, "mm", None, strengths, echoes, powers)
+        return first_echo_scan(self.name, sick, time_s, angles, values, rssi if rssi is not None else np.zeros(count, np.int64))
 
     def scans(self, times_s: Sequence[float], **request: Any) -> list[Scan]:
         return [self.scan(time_s, **request) for time_s in times_s]

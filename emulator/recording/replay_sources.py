@@ -154,11 +154,7 @@ class ColaReplay:
 
     def scan_configuration(self) -> dict[str, float]:
         """The scene options of the offered scan configuration nearest the log's rate and spacing."""
-        resolution_ticks = float(np.median(np.diff(np.degrees(self._angles)))) * ANGLE_TICKS_PER_DEG
-        pairs = [(f, r) for f, resolutions in self._sick.scan_configs.items() for r in resolutions]
-        frequency, resolution = min(pairs, key=lambda pair: (abs(FREQUENCY_TICKS_PER_HZ / pair[0] - self.period_s),
-                                                            abs(pair[1] - resolution_ticks)))
-        return {"scan_frequency_hz": frequency / FREQUENCY_TICKS_PER_HZ, "resolution_deg": resolution / ANGLE_TICKS_PER_DEG}
+        return cola_scan_configuration(self._sick, self.period_s, float(np.median(np.diff(np.degrees(self._angles)))))
 
     def scan(self, time_s: float, *, frequency_ticks: int | None = None, resolution_ticks: int | None = None,
              fog_filter: bool = False) -> Scan:
@@ -170,14 +166,31 @@ class ColaReplay:
         nearest = np.where(left_closer, nearest - 1, nearest)
         found = np.abs(self._angles[nearest] - wanted) <= ANGLE_TOLERANCE_RAD
         values = np.where(found, self._values[self._clock.row_at(time_s)][nearest], 0)
-        echoes = np.full((count, sick.echoes), -1, np.int64)
-        echoes[:, 0] = np.where(values > 0, values, -1)
-        powers = np.where(echoes >= 0, 0, -1)
-        return Scan(self.name, self.model, time_s, wanted, values, "mm", None, np.zeros(count, np.int64), echoes, powers)
+        return first_echo_scan(self.name, sick, time_s, wanted, values, np.zeros(count, np.int64))
 
     def scans(self, times_s: Sequence[float], **request: object) -> list[Scan]:
         """`scan` at each of `times_s` (a table look-up each: nothing to share)."""
         return [self.scan(t, **request) for t in times_s]
+
+
+def cola_scan_configuration(sick: SickModel, period_s: float, step_deg: float) -> dict[str, float]:
+    """The scene options of the scan configuration `sick` offers nearest a recording's period and beam spacing."""
+    resolution_ticks = step_deg * ANGLE_TICKS_PER_DEG
+    pairs = [(f, r) for f, resolutions in sick.scan_configs.items() for r in resolutions]
+    frequency, resolution = min(pairs, key=lambda pair: (abs(FREQUENCY_TICKS_PER_HZ / pair[0] - period_s),
+                                                        abs(pair[1] - resolution_ticks)))
+    return {"scan_frequency_hz": frequency / FREQUENCY_TICKS_PER_HZ, "resolution_deg": resolution / ANGLE_TICKS_PER_DEG}
+
+
+def first_echo_scan(name: str, sick: SickModel, time_s: float, angles: np.ndarray, values: np.ndarray,
+                    strengths: np.ndarray) -> Scan:
+    """A CoLa SICK's scan of recorded distance counts (0: no echo): each its beam's one echo, with its RSSI."""
+    strengths = np.where(values > 0, strengths, 0)
+    echoes = np.full((len(values), sick.echoes), -1, np.int64)
+    echoes[:, 0] = np.where(values > 0, values, -1)
+    powers = np.where(echoes >= 0, 0, -1)
+    powers[:, 0] = np.where(values > 0, strengths, -1)
+    return Scan(name, sick.name, time_s, angles, values, "mm", None, strengths, echoes, powers)
 
 
 def _convert_unit(values: np.ndarray, from_unit: str, to_unit: str) -> np.ndarray:

@@ -59,7 +59,7 @@ def scan_json(scan: Scan, sensor: Sensor | None = None, period_s: float | None =
         "time_s": scan.time_s,
         "unit": scan.unit,
         "angles_deg": np.round(np.degrees(scan.angles_rad), ANGLE_DECIMALS).tolist(),
-        "values": [int(v) for v in scan.values],
+        "values": scan.values.astype(int).tolist(),
         "ranges_m": _metres(ranges),
         **reported,
         **laser_scan_fields(scan, sensor.configured_period_s if sensor is not None else period_s),

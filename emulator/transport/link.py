@@ -115,10 +115,10 @@ class Link:
             return
         for output in outputs:
             if output.hang_up:
-                self._hanging_up = self._on_hang_up is not None
-                if self._hanging_up:
-                    break  # nothing after it reaches this client
-                continue
+                if self._on_hang_up is None:
+                    continue  # a link that cannot drop its client (a pty) keeps it
+                self._hanging_up = True
+                break  # nothing after it reaches this client
             self.outbox.put(output)
         if self.outbox.holding and self._pace_timer is not None:
             # the held output may now be replaced by these: look again at once, not on the timer
@@ -211,7 +211,7 @@ class Link:
         while True:
             data, wake_at = self.outbox.chunk(now)
             if not data:
-                if wake_at is None and self._hanging_up and self._on_hang_up is not None:
+                if wake_at is None and self._hanging_up:
                     self.close()
                     self._on_hang_up()
                     return
