@@ -56,6 +56,10 @@ class ColaClient:
     def send(self, payload: bytes) -> None:
         self._sock.sendall(frame(payload, self.dialect))
 
+    def send_at_once(self, payloads: list[bytes]) -> None:
+        """Several requests in one write, as a driver's burst or a hostile client sends them."""
+        self._sock.sendall(b"".join(frame(payload, self.dialect) for payload in payloads))
+
     def next_telegram(self, timeout_s: float = 5.0) -> tuple[Telegram, float]:
         deadline = time.monotonic() + timeout_s
         while not self._queue:

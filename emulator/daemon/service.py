@@ -54,6 +54,7 @@ from emulator.sensors import create_sensor, hokuyo_model, stream_batch
 from emulator.sensors.hokuyo import revolution_phase_ms
 from emulator.sensors.sick_cola import power_on_phase_ms
 from emulator.sensors.scan import Scan
+from emulator.transport import InputHold
 from emulator.transport.pty import PtyEndpoint
 from emulator.transport.rfc2217 import Rfc2217Endpoint
 from emulator.transport.tcp import IDLE_TIMEOUT_S, TcpEndpoint
@@ -78,7 +79,6 @@ _COLA_UNITS: weakref.WeakKeyDictionary[Any, ColaUnit] = weakref.WeakKeyDictionar
 
 PRUNE_STEP_S = 1.0  # the live history is pruned when the horizon has moved on this far (simulated s)
 OVERLOAD_CHECK_S = 1.0  # how often (wall) the daemon looks whether its sensors fell behind or caught up
-MAX_HELD_INPUT_BYTES = 65536  # client input waiting for a scan; beyond, it is discarded (counted)
 RETRY_AFTER_FAILURE_S = 0.1  # a device whose scan failed is polled again this much later (wall)
 
 DeviceFactory = Callable[..., Device]  # (spec, scans, *, phase_ms) → the endpoint's device
@@ -164,6 +164,22 @@ class _WaitingForScan:
         """A wait is called off by replacing it: `_resume` then finds another."""
 
 
+class _HeldInput:
+    """A slice of client input kept until the scan it may read is computed, and what the transport
+    runs once the device has taken it (`then`)."""
+
+    def __init__(self, data: bytes) -> None:
+        self.data = data
+        self._taken: Callable[[], None] | None = None
+
+    def then(self, taken: Callable[[], None]) -> None:
+        self._taken = taken
+
+    def taken(self) -> None:
+        if self._taken is not None:
+            self._taken()
+
+
 class DeviceSession:
     """One endpoint's device: client bytes in, outputs out, woken at its deadlines.
 
@@ -175,9 +191,10 @@ class DeviceSession:
     the device is woken only once that job is done, so the loop never waits on a
     computation (the device then finds its scan ready). Client bytes likewise:
     a device that says which scan a request now would read (`latest_scan_time`,
-    e.g. a URG's GD) gets them once that scan is computed; meanwhile they wait,
-    in order, up to MAX_HELD_INPUT_BYTES (a flood of GDs blocked the loop on
-    every new scan and starved the other sensors). `settle()` runs once the device's
+    e.g. a URG's GD) gets them once that scan is computed; meanwhile the transport's
+    slice waits here and the rest of the client's input in the kernel (a flood of GDs
+    blocked the loop on every new scan and starved the other sensors; input held
+    here instead was handed over in one piece, 64 KiB of scan requests at once). `settle()` runs once the device's
     output has gone: what its reads of scans put off (foreseeing the next batch,
     telling the view), so a wake-up's work before its send stays small and even; then a
     device that can (`prepare_next`) encodes its next scan ahead if `ready_scan` has it.
@@ -210,25 +227,20 @@ class DeviceSession:
         self._ready_scan = ready_scan
         self._call_later = call_later or loop.call_later
         self._timer: Cancellable | None = None
-        self._held: bytearray | None = None  # input waiting for the scan it may read
-        self.discarded_input = 0  # held input beyond MAX_HELD_INPUT_BYTES
+        self._held: _HeldInput | None = None  # input waiting for the scan it may read
 
     @property
     def baud(self) -> int | None:
         return self.device.baud
 
-    def received(self, data: bytes) -> None:
-        if self._held is not None:
-            room = MAX_HELD_INPUT_BYTES - len(self._held)
-            self._held += data[:room]
-            self.discarded_input += max(0, len(data) - room)
-            return
+    def received(self, data: bytes) -> InputHold | None:
         job = self._input_scan_job()
         if job is not None and not job.done():
-            held = self._held = bytearray(data)
+            held = self._held = _HeldInput(data)
             job.add_done_callback(lambda _: self._loop.call_soon_threadsafe(self._release, held))
-            return
+            return held.then
         self._deliver(self.device.receive(data, self._clock.now()))
+        return None
 
     def _input_scan_job(self) -> Future | None:
         """The job computing the scan a request received now would read, started if need be."""
@@ -244,11 +256,17 @@ class DeviceSession:
         self._prefetch(time_s)
         return self._pending(time_s)
 
-    def _release(self, held: bytearray) -> None:
-        """The scan held input waited for is ready: hand the input over (unless the client left)."""
+    def _release(self, held: _HeldInput) -> None:
+        """The scan held input waited for is ready: hand the input over (unless the client left), and
+        let the transport go on once the device has taken it (a live change may have put the scan off
+        again: then once that one is computed)."""
         if self._held is held:
             self._held = None
-            self.received(bytes(held))
+            again = self.received(held.data)
+            if again is None:
+                held.taken()
+            else:
+                again(held.taken)
 
     def disconnected(self) -> None:
         self._held = None

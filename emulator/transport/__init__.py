@@ -7,14 +7,19 @@ its endpoint's `send`. It never looks inside the bytes.
 
 from __future__ import annotations
 
-from typing import Protocol
+from typing import Callable, Protocol
+
+# A device's answer to input it cannot take yet: called with what to run once it has taken it.
+InputHold = Callable[[Callable[[], None]], None]
 
 
 class Session(Protocol):
     """The device side of one endpoint, as a transport sees it."""
 
-    def received(self, data: bytes) -> None:
-        """Bytes the client sent."""
+    def received(self, data: bytes) -> InputHold | None:
+        """Bytes the client sent. None once they are dealt with; a hold when the device keeps them
+        until it can answer (a request that reads a scan still being computed): the transport then
+        gives it nothing more from that client until the hold calls back."""
 
     def disconnected(self) -> None:
         """The client went away (pty closed, TCP connection ended)."""

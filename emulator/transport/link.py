@@ -58,7 +58,9 @@ class Link:
     Input costs bounded work per loop turn: a read is fed to the session
     INPUT_SLICE_BYTES at a time, one slice per turn, and the client is not read
     again until its last read is used up; a client whose input has cost more
-    than INPUT_CPU_SHARE of the loop's time waits until it is back within it. While more replies wait unread than
+    than INPUT_CPU_SHARE of the loop's time waits until it is back within it. A slice the device holds
+    (its answer reads a scan still being computed) stops the input until the device has taken it:
+    the rest waits unread, as behind a slow unit. While more replies wait unread than
     the outbox holds, the client is not read until it has taken enough of them: its bytes wait in
     the kernel (TCP's window, the tty's buffer) and its writes block, as a device's flow control
     makes them; none is lost, and what the daemon holds stays bounded.
@@ -85,6 +87,7 @@ class Link:
         self._hanging_up = False  # the device hung up: drop the client once the outbox is empty
         self.discarded_input = 0  # bytes dropped: a pty client at the wrong baud
         self._stalled = False  # input waits until the client has read the replies piled up
+        self._held = False  # the device keeps a slice until it can answer it: input waits until it has
         self._loop = loop
         self._fd = fd
         self._read = read
@@ -137,6 +140,7 @@ class Link:
             self._feeding = None
         self._unfed = memoryview(b"")
         self._stalled = False
+        self._held = False
         if self._waiting_writable:
             self._loop.remove_writer(self._fd)
             self._waiting_writable = False
@@ -178,10 +182,24 @@ class Link:
             return
         piece, self._unfed = self._unfed[:INPUT_SLICE_BYTES], self._unfed[INPUT_SLICE_BYTES:]
         started = time.thread_time()
-        self._session.received(bytes(piece))
+        hold = self._session.received(bytes(piece))
         self._cpu_credit -= time.thread_time() - started
         if not self._open:
             return
+        if hold is not None:  # the device keeps this slice until its scan is computed: nothing more until then
+            self._held = True
+            hold(self._released)
+            return
+        self._next_slice()
+
+    def _released(self) -> None:
+        """The device has taken the slice it held: go on with the client's input."""
+        if self._open and self._held:
+            self._held = False
+            self._next_slice()
+
+    def _next_slice(self) -> None:
+        """Schedule the next slice (or the next read), within the client's share of the loop's CPU."""
         now = self._loop.time()
         self._cpu_credit = min(INPUT_CPU_BURST_S, self._cpu_credit + (now - self._credit_at) * INPUT_CPU_SHARE)
         self._credit_at = now

@@ -202,3 +202,43 @@ def test_a_client_that_stops_reading_costs_another_sensor_nothing(served: ServeP
         dead.close()
     assert _wait_until_answering(served, "lms511")
     assert rss_kib(served.pid) - rss_before < RSS_GROWTH_LIMIT_KIB
+
+
+@pytest.mark.parametrize("model", ["lms111", "lms511"])
+def test_one_write_of_thousands_of_requests_is_answered_in_full_and_in_order(served: ServeProcess, model: str) -> None:
+    """A scan poll then 6000 other requests in one 108 KB write: the poll waits for its scan, and the
+    requests behind it wait unread (TCP pushes back on the client), none is dropped."""
+    count = 6000
+    with ColaClient(*served.endpoint(model, "tcp").address, Dialect.ASCII, timeout_s=10.0) as client:
+        client.send_at_once([b"sRN LMDscandata"] + [b"sRN DeviceIdent"] * count)
+        answers = [client.next_telegram(timeout_s=10.0)[0].payload for _ in range(count + 1)]
+    assert answers[0].startswith(b"sRA LMDscandata ")
+    assert all(answer.startswith(b"sRA DeviceIdent ") for answer in answers[1:])
+
+
+def test_one_write_of_scan_polls_starves_no_other_sensor(served: ServeProcess) -> None:
+    """64 KB of `sRN LMDscandata` in one write to an LMS511 set to its finest resolution, every echo
+    and RSSI, from a client that has just connected and reads the scans: its first poll waits for a
+    scan, and the polls behind it are then worked through a slice at a time like any input, so
+    another sensor's stream never stalls (handed over in one piece once that scan was computed,
+    they stopped every sensor for over 2 s)."""
+    rss_before = rss_kib(served.pid)
+    with ColaClient(*served.endpoint("lms511", "tcp").address, Dialect.ASCII) as setter:  # the unit keeps them
+        assert setter.ask(b"sMN SetAccessMode 03 F4724744") == b"sAN SetAccessMode 1"
+        assert setter.ask(b"sMN mLMPsetscancfg +2500 +1 +1667 0 0").startswith(b"sAN mLMPsetscancfg 0 ")
+        assert setter.ask(b"sWN LMDscandatacfg 1F 00 1 1 0 00 00 0 0 0 0 +1") == b"sWA LMDscandatacfg"
+        assert setter.ask(b"sWN FREchoFilter 1") == b"sWA FREchoFilter"
+    watch = Watch(served, "lms111")
+    try:
+        for _ in range(3):
+            assert _wait_until_answering(served, "lms511")
+            with ColaClient(*served.endpoint("lms511", "tcp").address, Dialect.ASCII) as flooder:
+                flooder.send_at_once([b"sRN LMDscandata"] * 4000)
+                scans, until = 0, time.monotonic() + 1.5
+                while time.monotonic() < until:
+                    scans += flooder.next_telegram(timeout_s=5.0)[0].payload.startswith(b"sRA LMDscandata ")
+                assert scans > 0
+    finally:
+        watch.check()
+    assert _wait_until_answering(served, "lms511")
+    assert rss_kib(served.pid) - rss_before < RSS_GROWTH_LIMIT_KIB
