@@ -109,6 +109,9 @@ class ColaReader:
                 self.dropped += 1
                 return len(buffer)
             return None
+        if end - at - 1 > MAX_TELEGRAM:  # all here at once: as long a telegram arriving in pieces is dropped too
+            self.dropped += 1
+            return end + 1
         payload = bytes(buffer[at + 1:end])
         if payload:
             telegrams.append(Telegram(Dialect.ASCII, payload))

@@ -190,6 +190,16 @@ def test_framing_edge_cases():
     assert reader.feed(flood) == [] and [t.payload for t in reader.feed(b"\x02sRN B\x03")] == [b"sRN B"]
 
 
+@pytest.mark.parametrize("pieces", [1, 40])
+def test_a_cola_a_telegram_longer_than_the_limit_is_dropped_however_it_arrives(pieces: int) -> None:
+    """Whole in one read or in slices: the limit is the telegram's length, not the read's."""
+    reader = ColaReader()
+    data = b"\x02sRN DeviceIdent" + b" " * 20_000 + b"\x03\x02sRN B\x03"
+    size = -(-len(data) // pieces)
+    telegrams = [t.payload for at in range(0, len(data), size) for t in reader.feed(data[at:at + size])]
+    assert telegrams == [b"sRN B"] and reader.dropped == 1
+
+
 def test_a_wrong_checksum_gets_no_answer():
     dev = device()
     good = frame(b"sRN SCdevicestate", Dialect.BINARY)
