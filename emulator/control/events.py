@@ -25,6 +25,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, TextIO
@@ -262,10 +263,28 @@ class EventWriter:
         except OSError as error:
             raise UserError(f"--events {self.path}: cannot write: {error.strerror}") from None
         self._file: TextIO = os.fdopen(fd, "w", encoding="utf-8")
+        self.error: str | None = None  # why the log stopped, once a write failed
 
     def write(self, event: LiveEvent) -> None:
-        self._file.write(json.dumps(event_json(event)) + "\n")
-        self._file.flush()
+        """Append the event; a write that fails (a full disk) ends the log with one line on stderr,
+        and the change stands: the session goes on, unlogged from there."""
+        if self.error is not None:
+            return
+        try:
+            self._file.write(json.dumps(event_json(event)) + "\n")
+            self._file.flush()
+        except OSError as error:
+            self.error = error.strerror or str(error)
+            print(f"lrf-emulator: --events {self.path}: cannot write ({self.error}): changes from {event.time_s:g} s on are not logged",
+                  file=sys.stderr, flush=True)
+            self._close_quietly()
 
     def close(self) -> None:
-        self._file.close()
+        if self.error is None:
+            self._close_quietly()
+
+    def _close_quietly(self) -> None:
+        try:
+            self._file.close()
+        except OSError:  # what the last flush left unwritten: already reported
+            pass

@@ -466,3 +466,18 @@ def test_only_a_live_body_takes_a_pose_from_outside() -> None:
         status, answer = call(d.control_url, "PUT", "/api/bodies/east_door/pose", {"position": [0, 0, 0], "yaw_deg": 5})
         assert status == 409 and answer["key"] == "bodies[east_door]" and '"live"' in answer["error"]
         assert call(d.control_url, "GET", "/api/events")[1] == []
+
+
+def test_an_event_log_that_cannot_be_written_ends_with_one_line_and_every_change_still_applies(room: Path) -> None:
+    """A full disk under `--events`: the change stands and is answered 200 with its state, the daemon
+    says once that the log stops there, and later changes apply as well (each one answered 500,
+    with a traceback, before)."""
+    with ServeProcess(room, ENDPOINTS, extra_args=("--control", "127.0.0.1:0", "--events", "/dev/full")) as daemon:
+        for density in (0.002, 0.004):
+            status, answer = call(daemon.control_url, "PATCH", "/api/smoke/regions/room", {"density": density})
+            assert status == 200, answer
+            assert answer["state"]["regions"]["room"]["density"] == density
+        assert call(daemon.control_url, "GET", "/api/events")[1][-1]["density"] == 0.004
+        lines = [line for line in daemon.stderr.splitlines() if "--events /dev/full" in line]
+        assert len(lines) == 1 and "cannot write (No space left on device)" in lines[0], daemon.stderr
+        assert "Traceback" not in daemon.stderr
