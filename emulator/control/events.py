@@ -36,7 +36,7 @@ from emulator.scene.drive import Twist
 from emulator.scene.live import ClockChange, LiveEvent, PlumeChange, PoseChange, RegionChange, TwistChange, event_record
 from emulator.scene.bodies import Live
 from emulator.scene.live_limits import LiveLimits
-from emulator.scene.loader import MAX_DENSITY, MAX_EXTENT_M, checked_values
+from emulator.scene.loader import MAX_DENSITY, MAX_EXTENT_M, MAX_PLUME_RATE, checked_values
 from emulator.scene.model import Pose, Scene
 from emulator.sensors.scan import TICKS_PER_S
 
@@ -95,7 +95,7 @@ def change(scene: Scene, op: Any, name: Any, body: Any, time_s: float, limits: L
         _known(name, [plume.name for plume in scene.plumes], "plume", where)
         values = _values(where, body, PLUME_KEYS)
         _at_least_one(values, PLUME_KEYS, where)
-        rate = _read(values.number, "rate", above=0) if "rate" in values else None
+        rate = _read(values.number, "rate", above=0, at_most=MAX_PLUME_RATE) if "rate" in values else None
         if rate is not None and (why := limits.particles.refusal(name, time_s, rate)) is not None:
             raise ControlError(400, f"{where}.rate: {why}", f"{where}.rate")
         return PlumeChange(

@@ -248,6 +248,10 @@ MAX_DENSITY = 1000.0
 MAX_DENSITY_TO_EXTINCTION = 1e6  # 1/m per density unit
 # Faster than anything a scanner rides on; a faster body's scan spreads its beams over more of the scene.
 MAX_BODY_SPEED_M_S = 1000.0
+# A plume's particles are numbered from its start at its rate: within these the numbers stay exact in int64
+# (a start of -1e20 overflowed them, and with a tiny lifetime a rate of 1e12 passed the particle budget).
+MAX_PLUME_START_S = 1e9  # |start| (s): 31 years
+MAX_PLUME_RATE = 1e6  # particles per second
 MAX_SCENE_ITEMS = 10_000  # objects + smoke regions + plumes
 MAX_MESH_TRIANGLES = 2_000_000  # triangles of every mesh file, counted once per use
 MAX_SENSORS = 256  # a fleet-sized scene: bench --section serve runs 120 sensors in one daemon
@@ -597,7 +601,7 @@ def _plumes(tables: list[_Table]) -> tuple[Plume, ...]:
     alive = 0.0
     for table in tables:
         name = table.name(seen)
-        start = table.number("start", 0.0)
+        start = table.number("start", 0.0, at_least=-MAX_PLUME_START_S, at_most=MAX_PLUME_START_S)
         stop = table.number("stop", 1e9)
         if not start < stop:
             start_text, stop_text = _show(table.raw("start", start)), _show(table.raw("stop", stop))
@@ -606,7 +610,7 @@ def _plumes(tables: list[_Table]) -> tuple[Plume, ...]:
             Plume(
                 name=name,
                 source=table.vec3("source"),
-                rate=table.number("rate", above=0),
+                rate=table.number("rate", above=0, at_most=MAX_PLUME_RATE),
                 lifetime=table.number("lifetime", above=0),
                 size=table.number("size", above=0, at_most=MAX_EXTENT_M),
                 growth=table.number("growth", 0.0, at_least=0, at_most=MAX_EXTENT_M),
