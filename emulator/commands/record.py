@@ -44,6 +44,7 @@ import argparse
 import heapq
 import itertools
 import math
+import os
 from pathlib import Path
 
 from emulator.commands.options import MAX_SIMULATED_TIME_S, add_events_in_option, add_scene_options, add_span_options, scene_from_args, world_from_args
@@ -160,6 +161,8 @@ def run(args: argparse.Namespace) -> int:
     for path in (args.out, truth_path):
         if path.is_symlink():
             raise UserError(f"{path} is a symbolic link: record writes only files, never through links")
+        if os.path.lexists(path) and not path.is_file():  # checked before either is opened: neither is left behind
+            raise UserError(f"{path}: exists and is not a regular file (a FIFO, device, socket or directory is never written: name a new file)")
     try:
         if args.format == "mcap":
             from emulator.recording.mcap import record_mcap  # foxglove-sdk: loaded only when asked for

@@ -22,6 +22,7 @@ import json
 import math
 import os
 import re
+import stat
 import tomllib
 from dataclasses import dataclass
 from importlib.resources import files
@@ -892,7 +893,9 @@ def _tum_file(path: Path, place: _Place) -> Keyframes:
     """A TUM trajectory: lines `t x y z qx qy qz qw`; blank lines and `#` comments skipped. Bounded: a file
     over TUM_MAX_BYTES or TUM_MAX_LINES is refused before it is parsed."""
     try:
-        with path.open("rb") as stream:
+        with os.fdopen(os.open(path, os.O_RDONLY | os.O_NONBLOCK), "rb") as stream:  # a FIFO's open must not block
+            if not stat.S_ISREG(os.fstat(stream.fileno()).st_mode):
+                raise place.error(f"{path.name} is not a regular file (a FIFO or device is never read: give a TUM file)")
             data = stream.read(TUM_MAX_BYTES + 1)
     except OSError as error:
         raise place.error(f"cannot read {path.name}: {error.strerror}") from error

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -101,6 +102,12 @@ def test_a_huge_tum_file_is_refused_before_it_is_parsed(tmp_path: Path, monkeypa
     with pytest.raises(SceneError, match=r"run\.tum has more than 4 lines$"):
         load_scene(write(tmp_path, ROBOT + 'trajectory = { file = "run.tum" }\n' + RIDER))
 
+
+
+def test_a_fifo_as_a_tum_file_is_refused_without_waiting_for_a_writer(tmp_path: Path) -> None:
+    os.mkfifo(tmp_path / "run.tum")  # opened to read, it blocked the loader until someone wrote to it
+    with pytest.raises(SceneError, match=r"^x\.toml: bodies\[0\]\.trajectory\.file: run\.tum is not a regular file"):
+        load_scene(write(tmp_path, ROBOT + 'trajectory = { file = "run.tum" }\n' + RIDER))
 
 # --------------------------------------------------------------------------- poses as functions of t
 

@@ -107,6 +107,16 @@ def test_an_out_below_a_file_says_it_is_not_a_directory(tmp_path: Path) -> None:
     assert sorted(path.name for path in tmp_path.iterdir()) == ["notes"]
 
 
+
+@pytest.mark.parametrize("kind", ["fifo", "directory"])
+def test_a_ground_truth_path_that_is_no_regular_file_is_refused_before_anything_is_written(tmp_path: Path, kind: str) -> None:
+    """x.log.tum a FIFO (opening it blocked record for ever) or a directory: one line, and no x.log left behind."""
+    truth = tmp_path / "x.log.tum"
+    os.mkfifo(truth) if kind == "fifo" else truth.mkdir()
+    result = run_cli("record", "railway", "--sensor", "urg", "--end", "0.2", "--out", "x.log", cwd=tmp_path)
+    refused(result, "x.log.tum", "is not a regular file")
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["x.log.tum"]
+
 # 3. plot --map draws the span's scans
 
 
