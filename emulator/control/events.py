@@ -47,6 +47,7 @@ TWIST_KEYS = ("vx", "vy", "wz")
 RESOLVED_KEYS = ("until",)  # what the daemon adds to a twist when it applies it: not part of the log
 CLOCK_KEYS = ("speed", "paused")
 TIME_DECIMALS = 6  # event times are on the µs grid
+MAX_EVENT_TIME_S = 1e9  # an event's time (31 years): within it a float still holds the µs grid (a JSON integer of 10**400 did not fit one)
 
 
 @dataclass
@@ -216,8 +217,8 @@ def event_from_json(scene: Scene, data: Any, limits: LiveLimits) -> LiveEvent:
         raise ControlError(400, f"expected a JSON object, got {_short(data)}")
     body = dict(data)
     time_value = body.pop("t", None)
-    if isinstance(time_value, bool) or not isinstance(time_value, (int, float)) or not 0 <= time_value < math.inf:
-        raise ControlError(400, f"t: expected a time in seconds >= 0, got {_short(time_value)}", "t")
+    if isinstance(time_value, bool) or not isinstance(time_value, (int, float)) or not 0 <= time_value < MAX_EVENT_TIME_S:
+        raise ControlError(400, f"t: expected a time in seconds, 0 <= t < {MAX_EVENT_TIME_S:g}, got {_short(time_value)}", "t")
     op, name = body.pop("op", None), body.pop("name", None)
     return change(scene, op, name, body, round(float(time_value), TIME_DECIMALS), limits)
 

@@ -170,10 +170,15 @@ def _read_toml(path: Path) -> dict[str, Any]:
         raise SceneError(f"{path.name}: not UTF-8 text (byte {error.start})") from error
     except OSError as error:
         raise SceneError(f"{path.name}: cannot read: {error.strerror}") from error
+    text = text.removeprefix("\ufeff")  # a byte-order mark some editors write first: not a TOML statement
     try:
         return tomllib.loads(text)
     except tomllib.TOMLDecodeError as error:
         raise SceneError(f"{path.name}: {_describe_toml_error(error, text)}") from error
+    except ValueError:  # Python's bound on the digits of an int read from text (4300), raised inside tomllib
+        huge = re.search(r"[0-9_]{4300,}", text)
+        line = text.count("\n", 0, huge.start()) + 1 if huge else max(1, len(text.splitlines()))
+        raise SceneError(f"{path.name}: line {line}: an integer of more than 4300 digits") from None
     except RecursionError:
         raise SceneError(f"{path.name}: arrays or tables nested too deeply for a scene file") from None
 

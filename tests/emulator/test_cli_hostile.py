@@ -161,3 +161,13 @@ def test_serve_refuses_a_speed_that_all_but_stops_the_clock(tmp_path: Path, valu
     """`--speed 1e-320` was taken: simulated time then crept so slowly that no scan ever came due."""
     line = refusal(tmp_path, "serve", "bocas", "--speed", value, *REFUSED_LATER)
     assert line.startswith("lrf-emulator serve: --speed must be >= 0.001 and <= 1000, got"), line
+
+
+@pytest.mark.parametrize("time_text", [str(10**400), "1e300"])
+def test_an_event_time_no_float_holds_to_the_microsecond_is_refused_naming_its_line(tmp_path: Path, time_text: str) -> None:
+    """A JSON integer of 400 digits was taken as a time and then overflowed the float (internal error, exit 1)."""
+    log = tmp_path / "events.jsonl"
+    log.write_text('{"t": 1.0, "op": "clock", "speed": 2}\n{"t": ' + time_text + ', "op": "clock", "speed": 1}\n')
+    line = refusal(tmp_path, "scan", "bocas", "--sensor", "urg", "--events-in", str(log))
+    assert line.startswith("lrf-emulator scan: events.jsonl: line 2: t: expected a time in seconds, 0 <= t < 1e+09, got"), line
+    assert len(line) < 200, line

@@ -103,6 +103,7 @@ CASES = [
     (PLUME.replace("source = [0, 0, 0]\n", ""), "smoke.plumes[0].source: missing required key"),
     (PLUME.replace("rate = 1", "rate = 0"), "smoke.plumes[0].rate: must be > 0, got 0"),
     # a start or a rate whose particle numbers overflowed int64 (internal error, exit 1)
+    ("[scene]\nname = 'a'\nseed = " + "9" * 5000, "line 3: an integer of more than 4300 digits"),  # tomllib's ValueError: exit 1
     (PLUME + "start = -1e20", "smoke.plumes[0].start: must be >= -1000000000.0, got -1e+20"),
     (PLUME.replace("rate = 1", "rate = 1e12").replace("lifetime = 1", "lifetime = 1e-9"),
      "smoke.plumes[0].rate: must be <= 1000000.0, got 1000000000000.0"),
@@ -211,6 +212,13 @@ def test_invalid_scene_is_rejected_with_one_line_naming_file_table_and_key(tmp_p
         load_scene(write_scene(tmp_path, text))
     assert str(raised.value) == f"x.toml: {expected}"
 
+
+
+def test_a_byte_order_mark_before_the_first_table_is_no_statement(tmp_path: Path) -> None:
+    """Some editors write one; tomllib read it as an invalid statement at line 1."""
+    path = tmp_path / "bom.toml"
+    path.write_text("\ufeff[scene]\nname = 'marked'\n" + PLUME, encoding="utf-8")
+    assert load_scene(path).name == "marked"
 
 def test_message_names_the_file_by_its_basename(tmp_path: Path) -> None:
     """The contract's own example, word for word."""
