@@ -61,15 +61,28 @@ def parse_endpoint(uri: str) -> Address:
     if sep and scheme == "pty":
         if not rest:
             raise UserError(f"endpoint {uri!r}: pty needs a path (pty:PATH)")
+        if "\0" in rest:
+            raise UserError(f"endpoint {uri!r}: a path cannot hold a NUL byte")
         return PtyAddress(rest)
     if sep and scheme in ("tcp", "rfc2217"):
         host, sep, port_text = rest.rpartition(":")
-        host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+        bracketed = host.startswith("[") and host.endswith("]")
+        host = host[1:-1] if bracketed else host
         if not sep or not host or not port_text.isdigit() or not 0 <= int(port_text) <= 65535:
             raise UserError(f"endpoint {uri!r}: expected {scheme}:HOST:PORT with PORT 0..65535")
+        if ":" in host and not bracketed and not _is_ipv6(host):  # tcp:::0 read as host ":"
+            raise UserError(f"endpoint {uri!r}: an IPv6 host goes in brackets ({scheme}:[::]:PORT, {scheme}:[::1]:PORT)")
         kind = TcpAddress if scheme == "tcp" else Rfc2217Address
         return kind(host, int(port_text))
     raise UserError(f"endpoint {uri!r}: expected {EXPECTED}")
+
+
+def _is_ipv6(host: str) -> bool:
+    try:
+        ipaddress.IPv6Address(host)
+    except ValueError:
+        return False
+    return True
 
 
 def endpoints_clash(first: Address, second: Address) -> bool:

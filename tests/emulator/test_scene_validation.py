@@ -134,12 +134,15 @@ CASES = [
     (URG + URG, 'sensors[1].name: duplicate name "urg" (also sensors[0])'),
     (URG + 'endpoints = "pty:ttyURG0"', 'sensors[0].endpoints: expected a list of endpoints, got "pty:ttyURG0"'),
     (URG + "endpoints = [10940]", "sensors[0].endpoints[0]: expected a string, got 10940"),
+    (URG + 'endpoints = ["pty:a\\u0000b"]',  # scan took it, serve failed on it (ValueError: embedded null byte, exit 1)
+     'sensors[0].endpoints[0]: expected "pty:PATH", "tcp:HOST:PORT" or "rfc2217:HOST:PORT" with PORT 0..65535, got "pty:a\\u0000b"'),
     *[
         (URG + f'endpoints = ["pty:ok", "{bad}"]',
          f'sensors[0].endpoints[1]: expected "pty:PATH", "tcp:HOST:PORT" or "rfc2217:HOST:PORT" with PORT 0..65535, '
          f'got "{bad}"')
         for bad in ("serial:/dev/ttyS0", "pty:", "tcp:127.0.0.1", "tcp::10940", "rfc2217:127.0.0.1",
-                    "tcp:127.0.0.1:65536", "tcp:127.0.0.1:http", "tcp:127.0.0.1:-1", "ttyURG0")
+                    "tcp:127.0.0.1:65536", "tcp:127.0.0.1:http", "tcp:127.0.0.1:-1", "ttyURG0",
+                    "tcp:::0", "rfc2217:a:b:10940")  # host ":" (serve: "tcp:[:]:0: Name or service not known")
     ],
     (URG + 'endpoints = ["tcp:127.0.0.1:10940"]\n' + LMS + 'endpoints = ["tcp:127.0.0.1:10940"]',
      'sensors[1].endpoints[0]: endpoint "tcp:127.0.0.1:10940" already used by sensor "urg"'),
