@@ -26,6 +26,11 @@ READ_SIZE = 65536
 # reads, timers and writes served in between, and no more is read from the
 # client meanwhile (the kernel's buffers push back on it).
 INPUT_SLICE_BYTES = 512
+# A slice whose device work takes longer than this makes the next slices smaller (halved, down to
+# MIN_INPUT_SLICE_BYTES; doubled back once they are cheap): input costing much per byte (an LMS200's
+# flood of STX, a CRC per candidate: 6 ms a 512-byte slice) holds the loop no longer than that a turn.
+SLICE_CPU_TARGET_S = 0.001
+MIN_INPUT_SLICE_BYTES = 16
 # A client's device work (CPU of the loop thread spent on its input) may use at
 # most this share of wall time, with bursts up to INPUT_CPU_BURST_S: a client
 # flooding commands is slowed down (its input waits in the kernel, pushing back
@@ -56,7 +61,8 @@ class Link:
     `on_lost` runs once when the client goes away; `close()` never calls it.
 
     Input costs bounded work per loop turn: a read is fed to the session
-    INPUT_SLICE_BYTES at a time, one slice per turn, and the client is not read
+    INPUT_SLICE_BYTES at a time (fewer while slices cost more than SLICE_CPU_TARGET_S), one slice
+    per turn, and the client is not read
     again until its last read is used up; a client whose input has cost more
     than INPUT_CPU_SHARE of the loop's time waits until it is back within it. A slice the device holds
     (its answer reads a scan still being computed) stops the input until the device has taken it:
@@ -99,6 +105,7 @@ class Link:
         self._waiting_writable = False
         self._open = True
         self._unfed = memoryview(b"")  # read but not yet given to the session
+        self._slice_bytes = INPUT_SLICE_BYTES  # what the next slice holds at most (smaller while slices cost much)
         self._feeding: asyncio.Handle | asyncio.TimerHandle | None = None
         self._cpu_credit = INPUT_CPU_BURST_S  # loop-thread CPU seconds this client may still spend now
         self._credit_at = loop.time()
@@ -180,10 +187,16 @@ class Link:
         if self.outbox.pending_bytes > self.outbox.limit_bytes:
             self._stalled = True  # fed again by _pump once the client has read enough
             return
-        piece, self._unfed = self._unfed[:INPUT_SLICE_BYTES], self._unfed[INPUT_SLICE_BYTES:]
+        size = self._slice_bytes
+        piece, self._unfed = self._unfed[:size], self._unfed[size:]
         started = time.thread_time()
         hold = self._session.received(bytes(piece))
-        self._cpu_credit -= time.thread_time() - started
+        spent = time.thread_time() - started
+        self._cpu_credit -= spent
+        if spent > SLICE_CPU_TARGET_S:
+            self._slice_bytes = max(MIN_INPUT_SLICE_BYTES, size // 2)
+        elif spent < SLICE_CPU_TARGET_S / 4 and len(piece) == size:
+            self._slice_bytes = min(INPUT_SLICE_BYTES, size * 2)
         if not self._open:
             return
         if hold is not None:  # the device keeps this slice until its scan is computed: nothing more until then

@@ -447,3 +447,35 @@ def test_tcp_second_connection_is_refused_while_the_first_is_served(loop_thread:
     assert third.read_exactly(6) == b"three\n"
     third.close()
     second.close()
+
+
+class CostlyDevice(LineDevice):
+    """Input that costs 20 µs of CPU a byte (an LMS200's reader checking a CRC at every STX of a flood)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.calls: list[tuple[int, float]] = []  # (bytes, CPU seconds) of each receive
+
+    def receive(self, data: bytes, now: float) -> list[Output]:
+        started = time.thread_time()
+        while time.thread_time() < started + 20e-6 * len(data):
+            pass
+        self.calls.append((len(data), time.thread_time() - started))
+        return []
+
+
+@pytest.mark.parametrize("kind", TRANSPORTS)
+def test_input_that_costs_much_per_byte_is_fed_in_smaller_slices(loop_thread: LoopThread, tmp_path: Path, kind: str) -> None:
+    """512-byte slices of it held the loop 10 ms each; they shrink until one costs about a millisecond."""
+    device = CostlyDevice()
+    served = serve(loop_thread, device, kind, tmp_path)
+    client = Client(kind, served.target, baud=115200)
+    try:
+        client.write(b"x" * 3000)
+        assert wait_for(lambda: sum(size for size, _ in device.calls) == 3000, timeout=20.0), device.calls
+    finally:
+        client.close()
+        loop_thread.call(served.endpoint.close)
+    assert device.calls[0][0] == 512  # the first slice is a whole one
+    assert max(cpu for _, cpu in device.calls[5:]) < 0.003, device.calls
+    assert max(size for size, _ in device.calls[5:]) <= 64, device.calls
