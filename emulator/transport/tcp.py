@@ -12,6 +12,7 @@ Output's baud, and baud commands are followed by the device logically.
 from __future__ import annotations
 
 import asyncio
+import select
 import socket
 
 from emulator.errors import UserError
@@ -113,12 +114,15 @@ class TcpEndpoint(ClientSlot):
 
     def _client_still_there(self) -> bool:
         """Whether the current client is alive; if its end-of-stream is waiting unread
-        (a driver restarting reconnects at once), it is retired here first."""
+        (a driver restarting reconnects at once), or it has closed its side with input still
+        unread, it is retired here first."""
         try:
             alive = self._client.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) != b""
         except BlockingIOError:
             alive = True
         except OSError:
+            alive = False
+        if alive and _finished_sending(self._client):  # gone with input unread (still worked off at its share)
             alive = False
         if not alive:
             self._client_left()
@@ -133,3 +137,10 @@ class TcpEndpoint(ClientSlot):
         if self._client is not None:
             self._client.close()
             self._client = None
+
+
+def _finished_sending(client: socket.socket) -> bool:
+    """Whether the peer has closed its side (or reset) the connection, whatever input waits unread."""
+    poller = select.poll()
+    poller.register(client.fileno(), select.POLLRDHUP)
+    return any(events & (select.POLLRDHUP | select.POLLHUP | select.POLLERR) for _, events in poller.poll(0))

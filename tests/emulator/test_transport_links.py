@@ -461,7 +461,7 @@ class CostlyDevice(LineDevice):
         while time.thread_time() < started + 20e-6 * len(data):
             pass
         self.calls.append((len(data), time.thread_time() - started))
-        return []
+        return super().receive(data, now)
 
 
 @pytest.mark.parametrize("kind", TRANSPORTS)
@@ -479,3 +479,24 @@ def test_input_that_costs_much_per_byte_is_fed_in_smaller_slices(loop_thread: Lo
     assert device.calls[0][0] == 512  # the first slice is a whole one
     assert max(cpu for _, cpu in device.calls[5:]) < 0.003, device.calls
     assert max(size for size, _ in device.calls[5:]) <= 64, device.calls
+
+
+def test_a_client_gone_with_its_input_unread_leaves_the_port_to_the_next(loop_thread: LoopThread, tmp_path: Path) -> None:
+    """Slow input beyond one read, then the client closes: worked off at its share of the loop it would
+    take minutes, and the port refused every new client meanwhile (the kernel still held the bytes, so the
+    daemon took the client for alive). A client that has finished sending gives way to a new one."""
+    device = CostlyDevice()
+    served = serve(loop_thread, device, "tcp", tmp_path)
+    first = socket.create_connection(("127.0.0.1", int(served.target)))
+    first.settimeout(5.0)
+    first.sendall(b"x" * 100_000)  # past one read (64 KiB): the rest waits in the daemon's kernel, the FIN after it
+    assert wait_for(lambda: len(device.calls) > 0)
+    first.close()
+    second = Client("tcp", served.target)
+    try:
+        second.write(b"echo next\n")
+        assert second.read_exactly(5) == b"next\n"
+        assert served.endpoint.refused == 0
+    finally:
+        second.close()
+        loop_thread.call(served.endpoint.close)
