@@ -21,6 +21,9 @@ SPHERE_SUBDIVISIONS = 3
 CYLINDER_SECTIONS = 64
 
 
+MAX_EXTENT_M = 100_000.0  # every coordinate, length, speed (m, m/s) of a scene, and of its meshes, lies within ±100 km
+
+
 class MeshLoadError(ValueError):
     """A mesh file that cannot be used; the message says why."""
 
@@ -39,12 +42,26 @@ def load_mesh_file(path: Path) -> trimesh.Trimesh:
     if status.st_size > MAX_MESH_FILE_BYTES:
         raise MeshLoadError(f"mesh {path.name} is {status.st_size} bytes; at most {MAX_MESH_FILE_BYTES}")
     try:
-        mesh = trimesh.load(path, force="mesh", process=True)
+        mesh = trimesh.load(path, force="mesh", process=False)
     except Exception as error:  # trimesh raises many kinds for a corrupt file
         raise MeshLoadError(f"cannot read mesh {path.name}: {error}") from error
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise MeshLoadError(f"mesh {path.name} has no triangles")
+    _check_vertices(mesh.vertices, path)
+    mesh.process()  # merged and cleaned once its numbers are known to be sane (1e300 overflowed in trimesh)
+    if len(mesh.faces) == 0:
+        raise MeshLoadError(f"mesh {path.name} has no triangles")
     return mesh
+
+
+def _check_vertices(vertices: np.ndarray, path: Path) -> None:
+    """Every coordinate finite and within ±MAX_EXTENT_M, as a scene file's own must be."""
+    bad = ~np.isfinite(vertices).all(axis=1)
+    if bad.any():
+        raise MeshLoadError(f"mesh {path.name}: vertex {int(bad.argmax())} is not finite")
+    far = (np.abs(vertices) > MAX_EXTENT_M).any(axis=1)
+    if far.any():
+        raise MeshLoadError(f"mesh {path.name}: vertex {int(far.argmax())} lies beyond ±{MAX_EXTENT_M:g} m")
 
 
 def shape_mesh(shape: Shape) -> trimesh.Trimesh:

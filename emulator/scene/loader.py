@@ -37,7 +37,7 @@ from emulator.scene.bodies import LIVE, Body, Keyframes, Trajectory, euler_quate
 from emulator.scene import drive as drive_defaults
 from emulator.scene.drive import Drive
 from emulator.scene.endpoints import Address, EndpointClaims, parse_endpoint
-from emulator.scene.geometry import MeshLoadError, load_mesh_file
+from emulator.scene.geometry import MAX_EXTENT_M, MeshLoadError, load_mesh_file
 from emulator.scene.materials import BUILTIN_MATERIALS, DEFAULT_MATERIAL
 from emulator.scene.sick_models import ANGLE_TICKS_PER_DEG, FREQUENCY_TICKS_PER_HZ
 from emulator.scene.sick_models import MODELS as SICK_MODELS
@@ -244,7 +244,6 @@ class _Place:
 
 
 # Limits on what a scene may cost (docs/scene-format.md, "Limits").
-MAX_EXTENT_M = 100_000.0  # every coordinate, length, speed (m, m/s) lies within ±100 km
 # Σ over plumes of rate × lifetime: the bound on a scan's smoke cost, so that a scan stays within its
 # sensor's period even after a live change (docs/scene-format.md, "Limits"; railway has 80, marulan 462)
 MAX_PARTICLES_ALIVE = 2_000

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -83,3 +84,22 @@ def test_a_corrupt_mesh_file_is_rejected_in_one_line(tmp_path: Path) -> None:
     message = str(raised.value)
     assert message.startswith("x.toml: objects[0].mesh: ")
     assert "broken.ply" in message and "\n" not in message
+
+
+@pytest.mark.parametrize(("vertex", "expected"), [
+    ("1e300 0 0", "vertex 3 lies beyond ±100000 m"), ("nan 0 0", "vertex 3 is not finite"), ("0 -2e5 0", "vertex 3 lies beyond ±100000 m"),
+])
+@pytest.mark.parametrize("table", ["objects", "regions"])
+def test_a_mesh_vertex_outside_the_scenes_bounds_is_refused_in_one_line(tmp_path: Path, table: str, vertex: str, expected: str) -> None:
+    """A scene file's coordinates lie within ±100 km; a mesh's were taken as they came (1e300 ran, with
+    numpy's overflow warnings from trimesh and the ray tracer; NaN silently)."""
+    faces = "f 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n"
+    (tmp_path / "far.obj").write_text(f"v 0 0 0\nv 1 0 0\nv 0 1 0\nv {vertex}\n" + faces)
+    scene_path = tmp_path / "x.toml"
+    scene_path.write_text(scene_text(table, "far.obj"))
+    where = "objects[0]" if table == "objects" else "smoke.regions[0]"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # refused before trimesh computes with them
+        with pytest.raises(SceneError) as raised:
+            load_scene(scene_path)
+    assert str(raised.value) == f"x.toml: {where}.mesh: mesh far.obj: {expected}"
