@@ -212,9 +212,28 @@ def _check_model(log: Log, model: str) -> None:
 def replay_sensor(log: Log, model: str, name: str) -> HokuyoReplay | LmsReplay | ColaReplay:
     """The replaying sensor for `model` (a Hokuyo's, "lms200" or a CoLa SICK's)."""
     if model in SICK_MODELS:
+        _check_wire_values(log, model, COLA_MAX_VALUE)
         return ColaReplay(log, name, SICK_MODELS[model])
     if model in HOKUYO_MODELS:
+        _check_wire_values(log, model, SCIP_MAX_VALUE)
         return HokuyoReplay(log, name, HOKUYO_MODELS[model])
     if model == LMS_MODEL:
+        _check_wire_values(log, model, LMS_MAX_VALUE)
         return LmsReplay(log, name)
     raise UserError(f"unknown model {model!r} (use {' or '.join(MODELS)})")
+
+
+# The largest value each protocol's scans carry: a SCIP 3-character value (18 bits), the LMS200's
+# 13-bit distance field (codes 8183..8191 on top), a CoLa 16-bit DIST channel. A log holding more was
+# clamped or masked on the wire without a word.
+SCIP_MAX_VALUE = (1 << 18) - 1
+LMS_MAX_VALUE = (1 << 13) - 1
+COLA_MAX_VALUE = 0xFFFF
+
+
+def _check_wire_values(log: Log, model: str, most: int) -> None:
+    too_large = log.values > most
+    if too_large.any():
+        row = int(too_large.any(axis=1).argmax())
+        value = int(log.values[row][too_large[row]][0])
+        raise UserError(f"the log's scan at {log.times_s[row]:g} s holds the value {value}; a {model} sends at most {most}")

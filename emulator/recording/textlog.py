@@ -35,6 +35,7 @@ from emulator.errors import UserError
 from emulator.sensors.scan import Scan
 
 HEADER_PREFIX = "# lrf-emulator log"
+MAX_DEVICE_VALUE = 0xFFFF_FFFF  # what any unit's wire value fits in (a CoLa DIST channel of u32 at most): beyond it a log is garbage
 
 
 @dataclass(frozen=True)
@@ -131,9 +132,10 @@ def read_log(path: str | Path) -> Log:
             )
     table = np.vstack(rows)
     values = table[:, 2::2]
-    if np.any(values != np.round(values)) or np.any(values < 0):
-        bad = line_numbers[int(np.argmax(np.any((values != np.round(values)) | (values < 0), axis=1)))]
-        raise UserError(f"{path.name}: line {bad}: distances must be whole non-negative device values")
+    wrong = (values != np.round(values)) | (values < 0) | (values > MAX_DEVICE_VALUE)
+    if np.any(wrong):
+        bad = line_numbers[int(np.argmax(np.any(wrong, axis=1)))]
+        raise UserError(f"{path.name}: line {bad}: distances must be whole device values, 0..{MAX_DEVICE_VALUE}")
     times = table[:, 0]
     if np.any(np.diff(times) <= 0):
         bad = line_numbers[int(np.argmax(np.diff(times) <= 0)) + 1]

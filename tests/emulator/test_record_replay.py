@@ -73,7 +73,8 @@ def test_reader_tolerates_comments_and_blank_lines(tmp_path: Path) -> None:
         ("1.0 0.0 12 0.1\n", "line 1: expected a timestamp and (angle, distance) pairs"),
         ("1.0 0.0 abc\n", "line 1: not a list of numbers"),
         ("1.0 0.0 12\n2.0 0.0 12 0.1 13\n", "line 2: 2 pairs, the first scan has 1"),
-        ("1.0 0.0 12.5\n", "line 1: distances must be whole non-negative device values"),
+        ("1.0 0.0 12.5\n", "line 1: distances must be whole device values, 0..4294967295"),
+        ("1.0 0.0 12\n2.0 0.0 1e300\n", "line 2: distances must be whole device values, 0..4294967295"),  # a numpy overflow warning
         ("2.0 0.0 12\n\n1.0 0.0 12\n", "line 3: timestamps must increase"),
         ("# only a comment\n", "no scans in log"),
     ],
@@ -200,6 +201,18 @@ def test_lms_replay_serves_any_window_and_converts_units(tmp_path: Path) -> None
     quarter = replay.scan(0.0, start_deg=40.0, step_deg=0.25, count=401)
     assert np.all(quarter.values[1::2] == 8191)  # x.25° and x.75° were never recorded
     assert np.array_equal(quarter.values[::2], values[80:281])
+
+
+@pytest.mark.parametrize(("model", "value", "most"), [("urg-04lx", 262144, 262143), ("lms200", 8192, 8191), ("tim571", 65536, 65535)])
+def test_replay_refuses_a_value_the_units_wire_cannot_carry(tmp_path: Path, model: str, value: int, most: int) -> None:
+    """A URG-04LX replaying 99999999 sent 262143 without a word (its 3-character field's most)."""
+    path = tmp_path / "any.log"
+    path.write_text("1.0 -0.006136 1200 0.0 15 0.006136 3000\n" f"2.0 -0.006136 1200 0.0 {value} 0.006136 3000\n")
+    with pytest.raises(UserError) as caught:
+        replay_sensor(read_log(path), model, "x")
+    assert str(caught.value) == f"the log's scan at 2 s holds the value {value}; a {model} sends at most {most}"
+    path.write_text(f"1.0 -0.006136 1200 0.0 {most} 0.006136 3000\n")
+    replay_sensor(read_log(path), model, "x")
 
 
 def test_replay_refuses_a_log_of_the_other_model(tmp_path: Path) -> None:
