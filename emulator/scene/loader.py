@@ -257,6 +257,7 @@ MAX_BODY_SPEED_M_S = 1000.0
 # (a start of -1e20 overflowed them, and with a tiny lifetime a rate of 1e12 passed the particle budget).
 MAX_PLUME_START_S = 1e9  # |start| (s): 31 years
 MAX_PLUME_RATE = 1e6  # particles per second
+NAME_SEPARATORS = ("=", ",", "/")  # what the command line and the control API's paths read between names
 MAX_SCENE_ITEMS = 10_000  # objects + smoke regions + plumes
 MAX_MESH_TRIANGLES = 2_000_000  # triangles of every mesh file, counted once per use
 MAX_SENSORS = 256  # a fleet-sized scene: bench --section serve runs 120 sensors in one daemon
@@ -402,6 +403,11 @@ class _Table:
         value = self.string("name")
         if not value.strip():
             raise self.place.key("name").error("must not be empty")
+        if not value.isprintable() or any(character in value for character in NAME_SEPARATORS):
+            raise self.place.key("name").error(
+                f"{_show(value)}: a name holds no control character and none of {' '.join(NAME_SEPARATORS)} "
+                "(it is named on the command line, SENSOR=URI and a,b lists, and in the control API's paths)"
+            )
         if value in seen:
             raise self.place.key("name").error(f"duplicate name {_show(value)} (also {seen[value]})")
         seen[value] = self.place.path

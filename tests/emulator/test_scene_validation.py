@@ -134,6 +134,12 @@ CASES = [
     (URG + URG, 'sensors[1].name: duplicate name "urg" (also sensors[0])'),
     (URG + 'endpoints = "pty:ttyURG0"', 'sensors[0].endpoints: expected a list of endpoints, got "pty:ttyURG0"'),
     (URG + "endpoints = [10940]", "sensors[0].endpoints[0]: expected a string, got 10940"),
+    *[  # `--endpoint fr=ont=tcp:…` and `--sensors a,b` could not name them, and a newline split every message
+        (URG.replace('name = "urg"', f'name = "{bad}"'),
+         f'sensors[0].name: "{shown}": a name holds no control character and none of = , / (it is named on the command '
+         'line, SENSOR=URI and a,b lists, and in the control API\'s paths)')
+        for bad, shown in (("fr=ont", "fr=ont"), ("a,b", "a,b"), ("up/down", "up/down"), ("two\\nlines", "two\\nlines"))
+    ],
     (URG + 'endpoints = ["pty:a\\u0000b"]',  # scan took it, serve failed on it (ValueError: embedded null byte, exit 1)
      'sensors[0].endpoints[0]: expected "pty:PATH", "tcp:HOST:PORT" or "rfc2217:HOST:PORT" with PORT 0..65535, got "pty:a\\u0000b"'),
     *[
