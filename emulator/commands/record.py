@@ -188,6 +188,10 @@ def _run_bag(args: argparse.Namespace, scene: Scene) -> int:
         raise UserError(f"--sensor {args.sensor!r}: a sensor name is empty (expected NAME[,NAME...])")
     if len(set(names)) != len(names):
         raise UserError(f"--sensor {args.sensor}: name each sensor once")
+    clashing = {"--map-frame": frames.map, "--odom-frame": frames.odom, "--base-frame": frames.base}
+    for option, frame in clashing.items():
+        if frame in names:  # a sensor's frame is its name, the base its parent
+            raise UserError(f"{option} {frame}: the sensor {frame}'s own frame (tf would make a frame its own parent)")
     sensors = [create_sensor(scene, name, world) for name in names]
     total = check_span(args, sensors)
     series = [scan_series(sensor, span_times(sensor.configured_period_s, args.start, args.end, sensor.configured_phase_s))
@@ -203,8 +207,8 @@ def frame_names(args: argparse.Namespace) -> FrameNames:
     that is its own parent breaks every tf lookup)."""
     given = {"--map-frame": args.map_frame, "--odom-frame": args.odom_frame, "--base-frame": args.base_frame}
     for option, name in given.items():
-        if not name or any(character.isspace() for character in name):
-            raise UserError(f"{option} {name!r}: expected a frame name (not empty, no spaces)")
+        if not name or any(character.isspace() for character in name) or name.startswith("/"):
+            raise UserError(f"{option} {name!r}: expected a frame name (not empty, no spaces, not starting with /: tf2 refuses it)")
     if len(set(given.values())) < len(given):
         shown = ", ".join(f"{option} {name}" for option, name in given.items())
         raise UserError(f"{shown}: the three frames must differ (tf would make a frame its own parent)")

@@ -294,6 +294,8 @@ def test_the_map_legend_counts_one_beam_and_one_scan_in_the_singular(tmp_path: P
         (["--base-frame", "base link"], "--base-frame 'base link': expected a frame name"),
         (["--map-frame", "odom"], "the three frames must differ"),
         (["--odom-frame", "base_link"], "the three frames must differ"),
+        (["--map-frame", "/map"], "--map-frame '/map': expected a frame name (not empty, no spaces, not starting with /"),
+        (["--base-frame", "urg"], "--base-frame urg: the sensor urg's own frame"),  # urg -> urg in /tf_static
     ],
 )
 def test_a_bags_frames_are_named_and_apart(tmp_path: Path, frames: list[str], words: str) -> None:
