@@ -233,6 +233,7 @@ def read_events(path: str | os.PathLike[str], scene: Scene) -> list[LiveEvent]:
         raise UserError(f"{path}: cannot read the event log: {getattr(error, 'strerror', None) or error}") from None
     events = []
     limits = LiveLimits(scene)
+    body_last_s: dict[str, float] = {}  # a body's live poses and twists come in time order
     for number, line in enumerate(text.splitlines(), start=1):
         if not line.strip():
             continue
@@ -243,6 +244,13 @@ def read_events(path: str | os.PathLike[str], scene: Scene) -> list[LiveEvent]:
             raise UserError(f"{path.name}: line {number}: not a JSON object") from None
         except ControlError as error:
             raise UserError(f"{path.name}: line {number}: {error.message}") from None
+        event = events[-1]
+        if isinstance(event, (PoseChange, TwistChange)):
+            last_s = body_last_s.get(event.name, -math.inf)
+            if event.time_s < last_s:
+                raise UserError(f"{path.name}: line {number}: bodies[{event.name}]: a live {event.op} at {event.time_s:g} s, "
+                                f"earlier than the body's last one ({last_s:g} s)")
+            body_last_s[event.name] = event.time_s
     return events
 
 

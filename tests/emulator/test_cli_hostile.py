@@ -171,3 +171,12 @@ def test_an_event_time_no_float_holds_to_the_microsecond_is_refused_naming_its_l
     line = refusal(tmp_path, "scan", "bocas", "--sensor", "urg", "--events-in", str(log))
     assert line.startswith("lrf-emulator scan: events.jsonl: line 2: t: expected a time in seconds, 0 <= t < 1e+09, got"), line
     assert len(line) < 200, line
+
+
+def test_a_live_pose_out_of_order_in_an_event_log_is_refused_naming_its_line(tmp_path: Path) -> None:
+    """It was refused as the world took it, naming neither the line nor the body."""
+    pose = '{"t": %s, "op": "pose", "name": "robot", "position": [0, 0, 0], "rotation_deg": [0, 0, 0]}\n'
+    log = tmp_path / "back.jsonl"
+    log.write_text(pose % 5.0 + pose % 1.0)
+    line = refusal(tmp_path, "scan", "rescue-live", "--sensor", "urg", "--events-in", str(log))
+    assert line == "lrf-emulator scan: back.jsonl: line 2: bodies[robot]: a live pose at 1 s, earlier than the body's last one (5 s)"
