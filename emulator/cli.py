@@ -17,6 +17,7 @@ if __name__ == "__main__" or os.path.basename(sys.argv[0]) == "lrf-emulator":
     hold_stop_signals()  # first: a ^C while the rest is imported must not print a traceback
 
 import argparse  # noqa: E402
+import errno  # noqa: E402
 import importlib  # noqa: E402
 import signal  # noqa: E402
 import traceback  # noqa: E402
@@ -113,6 +114,9 @@ class _VersionAction(argparse.Action):
         parser.exit()
 
 
+WRITE_FAILURES = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO)  # the machine's, not a bug: said as such
+
+
 def main(argv: list[str] | None = None) -> int:
     args = None
     hold_stop_signals()
@@ -132,6 +136,12 @@ def main(argv: list[str] | None = None) -> int:
         return 128 + signal.SIGINT
     except BrokenPipeError:
         return 0
+    except OSError as error:
+        if error.errno not in WRITE_FAILURES:
+            _report(args, f"internal error ({type(error).__name__}: {error}); run with --debug for the traceback")
+            return 1
+        _report(args, f"cannot write{' ' + str(error.filename) if error.filename else ''}: {error.strerror}")  # stdout on /dev/full
+        return 1
     except Exception as error:  # a bug: still one line, the traceback with --debug
         _report(args, f"internal error ({type(error).__name__}: {error}); run with --debug for the traceback")
         return 1

@@ -12,10 +12,11 @@ from __future__ import annotations
 
 import os
 import socket
+import subprocess
 from pathlib import Path
 
 import pytest
-from test_cli import run_cli
+from test_cli import CLI, run_cli
 from test_cli_refusals import one_line_refusal
 
 REFUSED_LATER = ["--idle-timeout", "0", "--view", "off", "--control", "off"]
@@ -180,3 +181,12 @@ def test_a_live_pose_out_of_order_in_an_event_log_is_refused_naming_its_line(tmp
     log.write_text(pose % 5.0 + pose % 1.0)
     line = refusal(tmp_path, "scan", "rescue-live", "--sensor", "urg", "--events-in", str(log))
     assert line == "lrf-emulator scan: back.jsonl: line 2: bodies[robot]: a live pose at 1 s, earlier than the body's last one (5 s)"
+
+
+@pytest.mark.parametrize("args", [["scenes"], ["scan", "bocas", "--sensor", "urg"]])
+def test_an_output_that_cannot_be_written_is_said_in_one_line_not_as_an_internal_error(tmp_path: Path, args: list[str]) -> None:
+    """Standard output on a full disk (/dev/full) read "internal error (OSError: …)"."""
+    with open("/dev/full", "w") as full:
+        result = subprocess.run([*CLI, *args], stdout=full, stderr=subprocess.PIPE, text=True, timeout=120, cwd=tmp_path)
+    assert result.returncode == 1
+    assert result.stderr == f"lrf-emulator {args[0]}: cannot write: No space left on device\n"
