@@ -111,6 +111,7 @@ class ControlClient:
                             seen += 1
                             if count is not None and seen >= count:
                                 return
+                    raise UserError(f"the daemon at {self.url} closed the connection (it stopped)")  # not a quiet end
         except aiohttp.WSServerHandshakeError as error:
             raise UserError(f"{error.status}: {error.message}") from None
         except (aiohttp.ClientError, OSError) as error:

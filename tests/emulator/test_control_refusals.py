@@ -178,3 +178,15 @@ def test_ctl_watch_says_when_the_clock_is_paused_and_when_it_resumes(daemon: Ser
             if watcher is not None:
                 watcher.terminate()
                 watcher.wait(timeout=WAIT_S)
+
+
+def test_ctl_watch_says_so_when_the_daemon_stops(room: Path) -> None:
+    """It ended with exit status 0 and not a word, as if it had seen all it was asked for."""
+    daemon = ServeProcess(room, ENDPOINTS, extra_args=["--control", "127.0.0.1:0", "--view", "off"])
+    try:
+        watcher, out, notes = _watch(daemon, "urg")
+        assert " urg " in out.next()
+    finally:
+        assert daemon.stop() == 0, daemon.stderr
+    assert watcher.wait(timeout=WAIT_S) == 2
+    assert notes.next() == f"lrf-emulator ctl: the daemon at {daemon.control_url} closed the connection (it stopped)"
