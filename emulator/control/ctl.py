@@ -150,6 +150,8 @@ def checked_url(url: str) -> str:
         valid = False
     if not valid:
         raise UserError(f"--url {url!r}: expected http://HOST:PORT (default {DEFAULT_URL})")
+    if "@" in parts.netloc:  # urllib sent it to DNS as the host name ("Name or service not known")
+        raise UserError(f"--url {url!r}: a user and password in the URL are not sent; give --token instead")
     return url
 
 

@@ -67,6 +67,7 @@ MALFORMED: dict[str, list[tuple[list[str], str]]] = {
         (["--url", "nonsense", "state"], "--url 'nonsense'"),
         (["--url", "http://127.0.0.1:99999", "state"], "--url"),
         (["--url", "http://127.0.0.1:1", "state"], "cannot reach the control API"),
+        (["--url", "http://user:pw@127.0.0.1:1", "state"], "a user and password in the URL are not sent; give --token instead"),  # "Name or service not known"
         (["plume", "fire", "rate"], "expected 1 number"),
         (["pose", "robot", "one", "two"], "invalid float value"),
         (["frobnicate"], "frobnicate"),
