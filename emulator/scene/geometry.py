@@ -30,15 +30,18 @@ class MeshLoadError(ValueError):
 
 def load_mesh_file(path: Path) -> trimesh.Trimesh:
     """Load a mesh file as one triangle mesh (a glTF scene is flattened)."""
-    if path.suffix.lower() not in MESH_SUFFIXES:
-        raise MeshLoadError(f"unsupported mesh format {path.suffix!r} (use {', '.join(MESH_SUFFIXES)})")
+    unsupported = MeshLoadError(f"unsupported mesh format {path.suffix!r} (use {', '.join(MESH_SUFFIXES)})")
     try:
         status = path.stat()
     except OSError as error:
+        if path.suffix.lower() not in MESH_SUFFIXES:
+            raise unsupported from None
         raise MeshLoadError(f"mesh file not found: {path}" if isinstance(error, FileNotFoundError)
                             else f"cannot read mesh {path}: {error.strerror}") from None
-    if not stat.S_ISREG(status.st_mode):  # never open a FIFO (it would block) or a device
+    if not stat.S_ISREG(status.st_mode):  # never open a FIFO (it would block) or a device (a link to /dev/zero)
         raise MeshLoadError(f"mesh {path} is not a regular file")
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise unsupported
     if status.st_size > MAX_MESH_FILE_BYTES:
         raise MeshLoadError(f"mesh {path.name} is {status.st_size} bytes; at most {MAX_MESH_FILE_BYTES}")
     try:

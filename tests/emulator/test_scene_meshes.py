@@ -103,3 +103,13 @@ def test_a_mesh_vertex_outside_the_scenes_bounds_is_refused_in_one_line(tmp_path
         with pytest.raises(SceneError) as raised:
             load_scene(scene_path)
     assert str(raised.value) == f"x.toml: {where}.mesh: mesh far.obj: {expected}"
+
+
+def test_a_mesh_linked_to_a_device_is_named_not_a_regular_file(tmp_path: Path) -> None:
+    """A link to /dev/zero resolves to a path with no suffix: it read "unsupported mesh format ''"."""
+    (tmp_path / "zero.stl").symlink_to("/dev/zero")
+    scene_path = tmp_path / "x.toml"
+    scene_path.write_text(scene_text("objects", "zero.stl"))
+    with pytest.raises(SceneError) as raised:
+        load_scene(scene_path)
+    assert str(raised.value) == "x.toml: objects[0].mesh: mesh /dev/zero is not a regular file"
