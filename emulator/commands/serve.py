@@ -150,6 +150,8 @@ def unix_time(text: str) -> float:
 def run(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.speed) and MIN_SPEED <= args.speed <= MAX_SPEED):
         raise UserError(f"--speed must be >= {MIN_SPEED:g} and <= {MAX_SPEED:g}, got {args.speed:g}")
+    if args.events is not None and args.mcap is not None and os.path.abspath(args.events) == os.path.abspath(args.mcap):
+        raise UserError(f"--events {args.events} and --mcap {args.mcap}: one file each (both wrote it)")
     overrides = endpoint_overrides(args.endpoint)
     watching = Watching.from_args(args)
     scene = scene_from_args(args)

@@ -190,3 +190,8 @@ def test_an_output_that_cannot_be_written_is_said_in_one_line_not_as_an_internal
         result = subprocess.run([*CLI, *args], stdout=full, stderr=subprocess.PIPE, text=True, timeout=120, cwd=tmp_path)
     assert result.returncode == 1
     assert result.stderr == f"lrf-emulator {args[0]}: cannot write: No space left on device\n"
+
+
+def test_serve_refuses_one_file_for_both_the_event_log_and_the_mcap_recording(tmp_path: Path) -> None:
+    line = refusal(tmp_path, "serve", "bocas", "--events", "same", "--mcap", "./same", *REFUSED_LATER)
+    assert line == "lrf-emulator serve: --events same and --mcap same: one file each (both wrote it)", line  # ./same
