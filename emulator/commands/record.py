@@ -89,11 +89,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "with tf and odometry",
     )
     bag = parser.add_argument_group("ROS bags (--format rosbag2|rosbag1)")
-    bag.add_argument("--epoch", type=bag_epoch, default=DEFAULT_EPOCH_S, metavar="UNIX_TIME",
+    bag.add_argument("--epoch", type=bag_epoch, default=None, metavar="UNIX_TIME",
                      help=f"ROS time of simulated time 0 (default {DEFAULT_EPOCH_S}; serve --epoch takes the same)")
-    bag.add_argument("--map-frame", default=FrameNames.map, metavar="NAME", help="REP 105 map frame (default map)")
-    bag.add_argument("--odom-frame", default=FrameNames.odom, metavar="NAME", help="REP 105 odom frame (default odom)")
-    bag.add_argument("--base-frame", default=FrameNames.base, metavar="NAME", help="the robot's frame (default base_link)")
+    bag.add_argument("--map-frame", metavar="NAME", help="REP 105 map frame (default map)")
+    bag.add_argument("--odom-frame", metavar="NAME", help="REP 105 odom frame (default odom)")
+    bag.add_argument("--base-frame", metavar="NAME", help="the robot's frame (default base_link)")
+BAG_OPTIONS = ("epoch", "map_frame", "odom_frame", "base_frame")  # None unless given: refused for a format that has no use for them
 
 
 def bag_epoch(text: str) -> float:
@@ -147,6 +148,10 @@ def check_span(args: argparse.Namespace, sensors: list[Sensor]) -> int:
 
 def run(args: argparse.Namespace) -> int:
     check_out(args.out, args.format)
+    if args.format not in BAG_FORMATS:
+        given = [f"--{name.replace('_', '-')}" for name in BAG_OPTIONS if getattr(args, name) is not None]
+        if given:
+            raise UserError(f"{', '.join(given)}: for --format rosbag2 or rosbag1 only (a {args.format} recording has no ROS time or frames)")
     scene = scene_from_args(args)
     if args.format in BAG_FORMATS:
         return _run_bag(args, scene)
@@ -197,7 +202,7 @@ def _run_bag(args: argparse.Namespace, scene: Scene) -> int:
     series = [scan_series(sensor, span_times(sensor.configured_period_s, args.start, args.end, sensor.configured_phase_s))
               for sensor in sensors]
     scans = progress(heapq.merge(*series, key=lambda scan: scan.time_s), total, f"record {args.sensor}")
-    count = write_bag(args.out, args.format, sensors, scans, args.end, frames, args.epoch)
+    count = write_bag(args.out, args.format, sensors, scans, args.end, frames, DEFAULT_EPOCH_S if args.epoch is None else args.epoch)
     print(f"recorded {_scans(count)} of {', '.join(names)} to the {args.format} bag {args.out}")
     return 0
 
@@ -205,14 +210,16 @@ def _run_bag(args: argparse.Namespace, scene: Scene) -> int:
 def frame_names(args: argparse.Namespace) -> FrameNames:
     """The bag's REP 105 frames: each named (tf refuses an empty frame id) and all three apart (a frame
     that is its own parent breaks every tf lookup)."""
-    given = {"--map-frame": args.map_frame, "--odom-frame": args.odom_frame, "--base-frame": args.base_frame}
+    defaults = FrameNames()
+    given = {f"--{kind}-frame": getattr(defaults, kind) if getattr(args, f"{kind}_frame") is None else getattr(args, f"{kind}_frame")
+             for kind in ("map", "odom", "base")}
     for option, name in given.items():
         if not name or any(character.isspace() for character in name) or name.startswith("/"):
             raise UserError(f"{option} {name!r}: expected a frame name (not empty, no spaces, not starting with /: tf2 refuses it)")
     if len(set(given.values())) < len(given):
         shown = ", ".join(f"{option} {name}" for option, name in given.items())
         raise UserError(f"{shown}: the three frames must differ (tf would make a frame its own parent)")
-    return FrameNames(args.map_frame, args.odom_frame, args.base_frame)
+    return FrameNames(*given.values())
 
 
 def _scans(count: int) -> str:

@@ -304,3 +304,16 @@ def test_a_bags_frames_are_named_and_apart(tmp_path: Path, frames: list[str], wo
     assert result.returncode == 2, result.stderr
     assert words in result.stderr and len(result.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "bag").exists()
+
+
+
+@pytest.mark.parametrize(("fmt", "options", "named"), [
+    ("text", ["--epoch", "1700000000"], "--epoch"),
+    ("mcap", ["--map-frame", "world", "--base-frame", "robot"], "--map-frame, --base-frame"),
+])
+def test_a_bags_options_given_to_another_format_are_refused(tmp_path: Path, fmt: str, options: list[str], named: str) -> None:
+    """They were taken and ignored: the user thought the recording held them."""
+    out = "x.log" if fmt == "text" else "x.mcap"
+    result = run_cli("record", "railway", "--sensor", "urg", "--end", "0.2", "--format", fmt, "--out", out, *options, cwd=tmp_path)
+    refused(result, f"{named}: for --format rosbag2 or rosbag1 only (a {fmt} recording has no ROS time or frames)")
+    assert list(tmp_path.iterdir()) == []
