@@ -136,14 +136,11 @@ def main(argv: list[str] | None = None) -> int:
         return 128 + signal.SIGINT
     except BrokenPipeError:
         return 0
-    except OSError as error:
-        if error.errno not in WRITE_FAILURES:
-            _report(args, f"internal error ({type(error).__name__}: {error}); run with --debug for the traceback")
-            return 1
-        _report(args, f"cannot write{' ' + str(error.filename) if error.filename else ''}: {error.strerror}")  # stdout on /dev/full
-        return 1
     except Exception as error:  # a bug: still one line, the traceback with --debug
-        _report(args, f"internal error ({type(error).__name__}: {error}); run with --debug for the traceback")
+        if isinstance(error, OSError) and error.errno in WRITE_FAILURES:  # stdout on /dev/full: no bug
+            _report(args, f"cannot write{' ' + str(error.filename) if error.filename else ''}: {error.strerror}")
+        else:
+            _report(args, f"internal error ({type(error).__name__}: {error}); run with --debug for the traceback")
         return 1
 
 

@@ -64,6 +64,9 @@ MAX_SCANS = 100_000  # record --max-scans's default: scans of all --sensor toget
 SUFFIX_FORMATS = {".mcap": "mcap", ".bag": "rosbag1", ".db3": "rosbag2"}
 
 
+BAG_OPTIONS = ("epoch", "map_frame", "odom_frame", "base_frame")  # None unless given: refused for a format that has no use for them
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_scene_options(parser)
     add_span_options(
@@ -94,7 +97,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     bag.add_argument("--map-frame", metavar="NAME", help="REP 105 map frame (default map)")
     bag.add_argument("--odom-frame", metavar="NAME", help="REP 105 odom frame (default odom)")
     bag.add_argument("--base-frame", metavar="NAME", help="the robot's frame (default base_link)")
-BAG_OPTIONS = ("epoch", "map_frame", "odom_frame", "base_frame")  # None unless given: refused for a format that has no use for them
 
 
 def bag_epoch(text: str) -> float:
