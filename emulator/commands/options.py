@@ -96,7 +96,8 @@ def add_events_in_option(parser: argparse.ArgumentParser, *names: str) -> None:
     """`--events-in FILE`: an event log of live changes (`serve --events`) to apply at its times."""
     parser.add_argument(
         "--events-in", *names, dest="events_in", type=named_path, default=None, metavar="FILE",
-        help="apply this event log of live changes (written by serve --events) at its recorded times",
+        help="apply this event log of live changes (written by serve --events) at its recorded times; "
+        "a pipe or FIFO (<(zcat log.gz)) is read whole first, so the command waits for its writer to finish",
     )
 
 

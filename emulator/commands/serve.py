@@ -70,7 +70,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--control-token", type=bearer_token, default=None, metavar="TOKEN",
         help="require Authorization: Bearer TOKEN on the control API (needed beyond loopback)",
     )
-    parser.add_argument("--events", type=named_path, default=None, metavar="FILE", help="write each live change to FILE (JSON lines)")
+    parser.add_argument("--events", type=named_path, default=None, metavar="FILE", help="write each live change to FILE (JSON lines; created or truncated; a FIFO waits for its reader)")
     add_events_in_option(parser)
     parser.add_argument(
         "--sensors",
