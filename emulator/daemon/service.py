@@ -239,7 +239,13 @@ class DeviceSession:
             held = self._held = _HeldInput(data)
             job.add_done_callback(lambda _: self._loop.call_soon_threadsafe(self._release, held))
             return held.then
-        self._deliver(self.device.receive(data, self._clock.now()))
+        try:
+            outputs = self.device.receive(data, self._clock.now())
+        except ScanJobFailed as error:  # as in _poll; the client's input goes on (it would wait for ever)
+            print(f"scan failed: {type(error).__name__}: {error}; the request that read it is not answered",
+                  file=sys.stderr, flush=True)
+            return None
+        self._deliver(outputs)
         return None
 
     def _input_scan_job(self) -> Future | None:

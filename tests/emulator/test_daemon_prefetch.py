@@ -18,6 +18,7 @@ from emulator.bench.serve_process import ServeProcess
 from emulator.daemon.clock import ManualClock
 from emulator.daemon.scan_cache import ScanCache
 from emulator.daemon.service import DeviceSession
+from emulator.daemon.workers import WorkerFailed
 from emulator.sensors.scan import Scan
 from tests.emulator.test_serve_disconnect import stats
 from protocols.lms2xx import Lms200Device, build_telegram
@@ -228,3 +229,42 @@ def test_a_streaming_hokuyo_encodes_its_next_scan_after_a_send_and_its_deadline_
     tokens = "".join({"read": "R", "encode": "E", "send": "s", "settle": "t"}[name] for name in order)
     assert tokens.count("RstE") >= 15  # looked up, sent, settled, the next one encoded
     assert tokens.count("REs") <= 1  # encoded at its deadline: at most the stream's first scan
+
+
+class FailingOnceDevice:
+    """A device whose first request reads a scan whose job failed (its worker died twice)."""
+
+    baud = None
+
+    def __init__(self) -> None:
+        self.received: list[bytes] = []
+
+    def receive(self, data: bytes, now: float) -> list:
+        self.received.append(data)
+        if len(self.received) == 1:
+            raise WorkerFailed("worker 0 died twice computing it")
+        return []
+
+    def poll(self, now: float) -> list:
+        return []
+
+    def next_deadline(self) -> float | None:
+        return None
+
+    def connection_lost(self) -> None:
+        pass
+
+
+def test_a_request_whose_scan_failed_is_reported_and_the_next_input_is_taken(capsys: Any) -> None:
+    """The failure escaped into the loop's exception handler, and the transport fed the client's next
+    input no more (the client's requests waited for ever)."""
+    loop = asyncio.new_event_loop()
+    device = FailingOnceDevice()
+    session = DeviceSession(device, ManualClock(1.0), loop)
+    try:
+        assert session.received(b"GD0044072501\n") is None
+        assert session.received(b"VV\n") is None
+    finally:
+        loop.close()
+    assert device.received == [b"GD0044072501\n", b"VV\n"]
+    assert capsys.readouterr().err == "scan failed: WorkerFailed: worker 0 died twice computing it; the request that read it is not answered\n"
