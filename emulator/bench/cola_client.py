@@ -12,7 +12,7 @@ import struct
 import time
 from dataclasses import dataclass
 
-from protocols.cola.framing import ColaReader, Dialect, Telegram, frame
+from protocols.cola.framing import MAX_SCAN_TELEGRAM, ColaReader, Dialect, Telegram, frame
 
 READ_CHUNK = 1 << 16
 
@@ -41,7 +41,7 @@ class ColaClient:
         self.dialect = dialect
         self._sock = socket.create_connection((host, port), timeout=timeout_s)
         self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self._reader = ColaReader()
+        self._reader = ColaReader(MAX_SCAN_TELEGRAM)  # the unit's scans, not a request's bound
         self._queue: list[tuple[Telegram, float]] = []
 
     def close(self) -> None:

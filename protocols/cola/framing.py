@@ -17,6 +17,7 @@ STX, ETX = 0x02, 0x03
 BINARY_START = b"\x02\x02\x02\x02"
 BINARY_HEADER = 8  # the four STX and the length
 MAX_TELEGRAM = 16_384  # a request longer than this is dropped (no command needs near as much)
+MAX_SCAN_TELEGRAM = 1 << 20  # what a host reading the unit takes: an LMS5xx scan of every echo and RSSI in CoLa-A is ~60 KB
 
 
 class Dialect(Enum):
@@ -45,12 +46,13 @@ def frame(payload: bytes, dialect: Dialect) -> bytes:
 
 class ColaReader:
     """Cuts a byte stream into telegrams. Dropped silently, as a unit drops them: a CoLa-B
-    telegram with a wrong checksum or a length beyond MAX_TELEGRAM, a CoLa-A telegram longer
-    than MAX_TELEGRAM, a CoLa-A telegram cut short by a new STX (the half before it)."""
+    telegram with a wrong checksum or a length beyond `max_telegram` (a unit's: MAX_TELEGRAM), a
+    CoLa-A telegram longer than that, a CoLa-A telegram cut short by a new STX (the half before it)."""
 
-    def __init__(self) -> None:
+    def __init__(self, max_telegram: int = MAX_TELEGRAM) -> None:
         self._buffer = bytearray()
         self.dropped = 0
+        self.max_telegram = max_telegram  # a host's reader of the unit's telegrams takes its scans (MAX_SCAN_TELEGRAM)
 
     def clear(self) -> None:
         self._buffer.clear()
@@ -83,7 +85,7 @@ class ColaReader:
         if len(buffer) - at < BINARY_HEADER:
             return None
         length = int.from_bytes(buffer[at + 4:at + 8], "big")
-        if length > MAX_TELEGRAM:
+        if length > self.max_telegram:
             self.dropped += 1
             return at + BINARY_HEADER
         end = at + BINARY_HEADER + length + 1
@@ -105,11 +107,11 @@ class ColaReader:
             self.dropped += 1
             return restart
         if end < 0:
-            if len(buffer) - at > MAX_TELEGRAM:
+            if len(buffer) - at > self.max_telegram:
                 self.dropped += 1
                 return len(buffer)
             return None
-        if end - at - 1 > MAX_TELEGRAM:  # all here at once: as long a telegram arriving in pieces is dropped too
+        if end - at - 1 > self.max_telegram:  # all here at once: as long a telegram arriving in pieces is dropped too
             self.dropped += 1
             return end + 1
         payload = bytes(buffer[at + 1:end])

@@ -20,7 +20,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from protocols.cola import ColaDevice, ColaUnit, UnitModel
-from protocols.cola.framing import ColaReader, Dialect, checksum, frame
+from protocols.cola.framing import MAX_SCAN_TELEGRAM, ColaReader, Dialect, checksum, frame
 from protocols.cola.values import hex_token_runs, hex_tokens
 
 TIM = UnitModel("TiM5xx", "TiM5xx", "V3.10", "12345678", -450000, 2250000, {1500: (3333,)}, (1500, 3333), 1, 1.0)
@@ -198,6 +198,8 @@ def test_a_cola_a_telegram_longer_than_the_limit_is_dropped_however_it_arrives(p
     size = -(-len(data) // pieces)
     telegrams = [t.payload for at in range(0, len(data), size) for t in reader.feed(data[at:at + size])]
     assert telegrams == [b"sRN B"] and reader.dropped == 1
+    host = ColaReader(MAX_SCAN_TELEGRAM)  # a host reading the unit: its scans run to ~60 KB in CoLa-A
+    assert [len(t.payload) for t in host.feed(data)] == [len(b"sRN DeviceIdent") + 20_000, 5]
 
 
 def test_a_wrong_checksum_gets_no_answer():

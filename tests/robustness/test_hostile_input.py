@@ -18,7 +18,7 @@ import pytest
 from emulator import cli
 from emulator.commands.stopping import STOP_SIGNALS
 from emulator.bench.serve_process import serve_command
-from emulator.scene.loader import MAX_BODY_SPEED_M_S, MAX_DENSITY, MAX_PARTICLES_ALIVE
+from emulator.scene.loader import MAX_BODY_SPEED_M_S, MAX_DENSITY, MAX_PARTICLES_ALIVE, MAX_PLUME_RATE
 
 SENSOR = """
 [[sensors]]
@@ -61,6 +61,8 @@ mesh = "{mesh}"
 # name → (scene text, what the one error line must contain)
 SCENES: dict[str, tuple[str, tuple[str, ...]]] = {
     "plume rate 1e9": (PLUME.format(rate=1e9, lifetime=2.0, density=1.0) + SENSOR,
+                       ("smoke.plumes[0].rate", f"must be <= {MAX_PLUME_RATE}")),
+    "plume rate 1e6": (PLUME.format(rate=1e6, lifetime=2.0, density=1.0) + SENSOR,
                        ("smoke.plumes[0].rate", f"particle budget allows at most {MAX_PARTICLES_ALIVE}")),
     "plume rate 1e5": (PLUME.format(rate=1e5, lifetime=2.0, density=1.0) + SENSOR, ("smoke.plumes[0].rate",)),
     "plume lifetime 1e12": (PLUME.format(rate=10, lifetime=1e12, density=1.0) + SENSOR, ("smoke.plumes[0].rate",)),
