@@ -164,6 +164,11 @@ class _WaitingForScan:
         """A wait is called off by replacing it: `_resume` then finds another."""
 
 
+def _report_failed_scan(error: ScanJobFailed, then: str) -> None:
+    """One line on stderr for a scan whose job failed (its worker died twice), and what follows."""
+    print(f"scan failed: {type(error).__name__}: {error}; {then}", file=sys.stderr, flush=True)
+
+
 class _HeldInput:
     """A slice of client input kept until the scan it may read is computed, and what the transport
     runs once the device has taken it (`then`)."""
@@ -194,9 +199,9 @@ class DeviceSession:
     e.g. a URG's GD) gets them once that scan is computed; meanwhile the transport's
     slice waits here and the rest of the client's input in the kernel (a flood of GDs
     blocked the loop on every new scan and starved the other sensors; input held
-    here instead was handed over in one piece, 64 KiB of scan requests at once). `settle()` runs once the device's
-    output has gone: what its reads of scans put off (foreseeing the next batch,
-    telling the view), so a wake-up's work before its send stays small and even; then a
+    here instead was handed over in one piece, 64 KiB of scan requests at once).
+    `settle()` runs once the device's output has gone: what its reads of scans put off
+    (foreseeing the next batch, telling the view), so a wake-up's work before its send stays small and even; then a
     device that can (`prepare_next`) encodes its next scan ahead if `ready_scan` has it.
     """
 
@@ -242,8 +247,7 @@ class DeviceSession:
         try:
             outputs = self.device.receive(data, self._clock.now())
         except ScanJobFailed as error:  # as in _poll; the client's input goes on (it would wait for ever)
-            print(f"scan failed: {type(error).__name__}: {error}; the request that read it is not answered",
-                  file=sys.stderr, flush=True)
+            _report_failed_scan(error, "the request that read it is not answered")
             return None
         self._deliver(outputs)
         return None
@@ -333,8 +337,7 @@ class DeviceSession:
         try:
             outputs = self.device.poll(max(self._clock.now(), at if at is not None else -math.inf))
         except ScanJobFailed as error:
-            print(f"scan failed: {type(error).__name__}: {error}; retrying in {RETRY_AFTER_FAILURE_S:g} s",
-                  file=sys.stderr, flush=True)
+            _report_failed_scan(error, f"retrying in {RETRY_AFTER_FAILURE_S:g} s")
             self.stop()
             self._timer = self._call_later(RETRY_AFTER_FAILURE_S, self._wake)
             return

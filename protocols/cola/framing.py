@@ -111,7 +111,7 @@ class ColaReader:
                 self.dropped += 1
                 return len(buffer)
             return None
-        if end - at - 1 > self.max_telegram:  # all here at once: as long a telegram arriving in pieces is dropped too
+        if end - at > self.max_telegram:  # all here at once: counted as the pieces are above (its STX on)
             self.dropped += 1
             return end + 1
         payload = bytes(buffer[at + 1:end])
